@@ -1,0 +1,68 @@
+// The flarekit command: parses arguments, calls the libraries, maps errors to exit codes
+// (0 success, 1 runtime failure, 2 bad usage or input, 130 interrupted).
+#include <iostream>
+
+#include <CLI/CLI.hpp>
+
+#include "app/commands.h"
+#include "common/error.h"
+#include "common/log.h"
+
+#ifndef FLAREKIT_VERSION
+#define FLAREKIT_VERSION "unknown"
+#endif
+
+int main(int argc, char** argv) {
+  using namespace flarekit;
+  CLI::App app{"FlareKit: measure the lens flare of a real lens, fit a model of every ghost, "
+               "and predict flare for light planning.",
+               "flarekit"};
+  app.set_version_flag("--version", "flarekit " FLAREKIT_VERSION);
+  app.require_subcommand(1);
+  app.fallthrough();
+  bool quiet = false, verbose = false;
+  app.add_flag("-q,--quiet", quiet, "Print only warnings and errors, no progress");
+  app.add_flag("-v,--verbose", verbose, "Print debugging detail");
+  app.parse_complete_callback([&] {
+    if (quiet) setLogLevel(LogLevel::kWarning);
+    if (verbose) setLogLevel(LogLevel::kDebug);
+  });
+
+  app::registerCommonCommands(app);
+#ifdef FLAREKIT_WITH_RENDER
+  app::registerRenderCommands(app);
+#endif
+#ifdef FLAREKIT_WITH_ACQUISITION
+  app::registerAcquisitionCommands(app);
+#endif
+#ifdef FLAREKIT_WITH_MODEL
+  app::registerModelCommands(app);
+#endif
+#ifdef FLAREKIT_WITH_FIT
+  app::registerFitCommands(app);
+#endif
+#ifdef FLAREKIT_WITH_PREDICT
+  app::registerPredictCommands(app);
+#endif
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help, --version
+    std::cerr << "flarekit: error: " << oneLine(e.what()) << " (see flarekit --help)\n";
+    return 2;
+  } catch (const InputError& e) {
+    logError(e.what());
+    return 2;
+  } catch (const Interrupted& e) {
+    logError(e.what());
+    return 130;
+  } catch (const RuntimeError& e) {
+    logError(e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    logError(std::string("unexpected failure: ") + e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,27 @@
+# Every third-party library comes from a Debian 12 package, found through its CMake config or
+# pkg-config. Nothing is downloaded at configure or build time.
+find_package(PkgConfig REQUIRED)
+
+find_package(OpenCV 4.6 REQUIRED COMPONENTS core imgproc imgcodecs video features2d)
+find_package(Eigen3 3.4 REQUIRED NO_MODULE)
+find_package(Ceres 2.1 REQUIRED)
+find_package(OpenEXR 3.1 REQUIRED)
+find_package(Imath REQUIRED)
+find_package(TBB REQUIRED)
+find_package(CLI11 REQUIRED)
+find_package(nlohmann_json 3.11 REQUIRED)
+find_package(tomlplusplus 3.3 REQUIRED)
+find_package(TIFF REQUIRED)
+find_package(TinyGLTF REQUIRED)
+pkg_check_modules(GPIOD REQUIRED IMPORTED_TARGET libgpiod>=1.6)
+pkg_check_modules(LIBUSB REQUIRED IMPORTED_TARGET libusb-1.0)
+pkg_check_modules(GPHOTO2 REQUIRED IMPORTED_TARGET libgphoto2)
+pkg_check_modules(LIBRAW REQUIRED IMPORTED_TARGET libraw_r)
+
+if(FLAREKIT_BUILD_TESTS)
+  find_package(GTest REQUIRED)
+  pkg_check_modules(UMOCKDEV REQUIRED IMPORTED_TARGET umockdev-1.0)
+endif()
+if(FLAREKIT_BUILD_BENCHMARKS)
+  find_package(benchmark REQUIRED)
+endif()

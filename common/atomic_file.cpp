@@ -1,0 +1,97 @@
+#include "common/atomic_file.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include "common/error.h"
+
+namespace flarekit {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string errnoText() { return std::strerror(errno); }
+
+// fsyncs an existing file or folder; throws RuntimeError naming `what`.
+void syncPath(const fs::path& p, bool directory) {
+  int fd = ::open(p.c_str(), directory ? (O_RDONLY | O_DIRECTORY) : O_RDONLY);
+  if (fd < 0) throw RuntimeError("cannot open " + p.string() + " to flush it: " + errnoText());
+  int rc = ::fsync(fd);
+  int saved = errno;
+  ::close(fd);
+  // Some file systems do not support fsync on folders (EINVAL); the rename is still atomic.
+  if (rc != 0 && !(directory && saved == EINVAL))
+    throw RuntimeError("cannot flush " + p.string() + " to disk: " + std::strerror(saved));
+}
+
+fs::path temporaryNameFor(const fs::path& path) {
+  static thread_local std::mt19937_64 rng{std::random_device{}() ^
+                                          static_cast<unsigned long>(::getpid())};
+  static constexpr char kAlphabet[] = "abcdefghijklmnopqrstuvwxyz0123456789";
+  std::string tag;
+  for (int i = 0; i < 6; ++i) tag += kAlphabet[rng() % (sizeof(kAlphabet) - 1)];
+  // ".<stem>.tmp-XXXXXX<ext>": hidden, and keeps the extension for format-by-extension writers.
+  return path.parent_path() /
+         ("." + path.stem().string() + ".tmp-" + tag + path.extension().string());
+}
+
+}  // namespace
+
+void writeFileAtomically(const fs::path& path,
+                         const std::function<void(const fs::path& temporary)>& write) {
+  fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec))
+    throw RuntimeError("cannot write " + path.string() + ": folder " + folder.string() +
+                       " does not exist; create it first");
+  if (::access(folder.c_str(), W_OK) != 0)
+    throw RuntimeError("cannot write " + path.string() + ": folder " + folder.string() +
+                       " is not writable (" + errnoText() + ")");
+  if (fs::is_directory(path, ec))
+    throw RuntimeError("cannot write " + path.string() + ": it is a folder");
+
+  fs::path temporary = temporaryNameFor(path.parent_path().empty() ? fs::path(".") / path : path);
+  try {
+    write(temporary);
+    if (!fs::exists(temporary, ec))
+      throw RuntimeError("writing " + path.string() + " produced no file");
+    syncPath(temporary, false);
+    if (::rename(temporary.c_str(), path.c_str()) != 0)
+      throw RuntimeError("cannot rename " + temporary.string() + " to " + path.string() + ": " +
+                         errnoText());
+  } catch (...) {
+    fs::remove(temporary, ec);
+    throw;
+  }
+  syncPath(folder, true);
+}
+
+void writeTextFileAtomically(const fs::path& path, std::string_view content) {
+  writeFileAtomically(path, [&](const fs::path& temporary) {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    if (!out) throw RuntimeError("cannot create " + temporary.string() + ": " + errnoText());
+    out.write(content.data(), static_cast<std::streamsize>(content.size()));
+    out.flush();
+    if (!out) throw RuntimeError("cannot write " + path.string() + ": " + errnoText() +
+                                 " (is the disk full?)");
+  });
+}
+
+std::string readTextFile(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw InputError(path.string(), "no such file");
+  if (fs::is_directory(path, ec)) throw InputError(path.string(), "is a folder, not a file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path.string(), "cannot open: " + errnoText());
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+}  // namespace flarekit

@@ -1,0 +1,27 @@
+#pragma once
+// Every file FlareKit writes appears whole or not at all (shared/DESIGN.md, Conventions): the
+// content goes to a temporary name in the same folder, is flushed and fsynced, and is renamed over
+// the target; the folder is fsynced so the rename survives a crash. A writer killed at any moment
+// leaves the old file (or none) and at worst a stray ".<name>.tmp-XXXXXX" beside it.
+
+#include <filesystem>
+#include <functional>
+#include <string_view>
+
+namespace flarekit {
+
+// Writes `path` atomically. `write` receives the temporary path (same folder, same extension, so
+// writers that choose the format from the extension, such as cv::imwrite, work) and must create
+// the file there. If `write` throws, the temporary file is removed, `path` is untouched and the
+// exception propagates. Throws RuntimeError when the folder is missing or not writable.
+// Thread-safe for different paths.
+void writeFileAtomically(const std::filesystem::path& path,
+                         const std::function<void(const std::filesystem::path& temporary)>& write);
+
+// Writes `content` to `path` atomically.
+void writeTextFileAtomically(const std::filesystem::path& path, std::string_view content);
+
+// Reads a whole file; throws InputError("<path>: cannot read ...") when it is missing.
+std::string readTextFile(const std::filesystem::path& path);
+
+}  // namespace flarekit
