@@ -1,0 +1,45 @@
+#pragma once
+// The shape of the iris: a circle, an n-blade polygon with optional rounding, or a mask image
+// (Hullin 2011 §3.2: the aperture is applied per pixel through the interpolated aperture
+// coordinates (u, v) of each ray, normalised so the stop's semi-aperture is 1).
+
+#include <string>
+
+#include <opencv2/core.hpp>
+
+namespace flarekit::render {
+
+enum class ApertureKind { kCircle, kPolygon, kMask };
+
+struct ApertureShape {
+  ApertureKind kind = ApertureKind::kPolygon;  // default: a 6-blade iris, as most photo lenses
+  int blades = 6;               // number of blades (kPolygon), 3..32
+  // 0 = straight blades; 1 = a circle. Between them the polygon's corners are rounded: the shape
+  // is the set of points whose polygon distance function blends to a circle (see aperture.cpp).
+  double rounding = 0.0;
+  double rotation_deg = 0.0;    // rotation of the polygon about the axis (in image coordinates)
+  // kMask: CV_8UC1 or CV_32FC1 transmission image, 0..1 (or 0..255), covering the square
+  // [−1, 1]² of aperture coordinates; row 0 at v = −1 (y down as images).
+  cv::Mat mask;
+
+  bool IsValid(std::string* error) const;
+};
+
+// Transmission (0..1) of the aperture at normalised aperture coordinates (u, v) (radius 1 = the
+// stop's semi-aperture; the polygon is inscribed in the unit circle). Thread-safe.
+class Aperture {
+ public:
+  explicit Aperture(const ApertureShape& shape);
+  float transmission(float u, float v) const;
+  // A size×size image of the transmission over [−1, 1]² (for the starburst FFT and previews).
+  cv::Mat raster(int size) const;
+  const ApertureShape& shape() const { return shape_; }
+
+ private:
+  ApertureShape shape_;
+  cv::Mat mask_;            // CV_32FC1, 0..1
+  std::vector<float> edge_nx_, edge_ny_;  // inward polygon edge normals
+  float apothem_ = 1.0f;    // distance of the edges from the centre
+};
+
+}  // namespace flarekit::render
