@@ -1,0 +1,491 @@
+#include "acquisition/capture.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "acquisition/simulated_camera.h"
+#include "common/atomic_file.h"
+#include "common/config.h"
+#include "common/log.h"
+#include "common/progress.h"
+
+namespace flarekit::acquisition {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+bool CapturePlan::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (!std::isfinite(from_deg) || !std::isfinite(to_deg)) return fail("angles must be finite");
+  if (!(step_deg > 0) || !std::isfinite(step_deg)) return fail("step must be positive");
+  const double n = std::abs(to_deg - from_deg) / step_deg;
+  if (std::abs(n - std::round(n)) > 1e-6)
+    return fail("the range from " + std::to_string(from_deg) + "° to " + std::to_string(to_deg) +
+                "° is not a whole number of " + std::to_string(step_deg) + "° steps");
+  if (n > 1e6) return fail("more than a million angles");
+  if (exposures_s.empty()) return fail("need at least one exposure time");
+  for (size_t i = 0; i < exposures_s.size(); ++i) {
+    if (!(exposures_s[i] > 0) || !std::isfinite(exposures_s[i]))
+      return fail("exposure times must be positive");
+    for (size_t j = 0; j < i; ++j)
+      if (exposures_s[j] == exposures_s[i]) return fail("exposure times must differ");
+  }
+  if (exposures_s.size() > 16) return fail("at most 16 exposures per bracket");
+  if (dark_frames < 0) return fail("dark_frames must be ≥ 0");
+  if (!(iso > 0)) return fail("iso must be positive");
+  if (!(f_number > 0)) return fail("f_number must be positive");
+  if (max_retries < 0) return fail("max_retries must be ≥ 0");
+  if (!(retry_delay_s >= 0)) return fail("retry_delay_s must be ≥ 0");
+  return true;
+}
+
+std::vector<double> CapturePlan::anglesDeg() const {
+  const long long n = std::llround(std::abs(to_deg - from_deg) / step_deg);
+  const double dir = to_deg >= from_deg ? 1.0 : -1.0;
+  std::vector<double> angles;
+  angles.reserve(n + 1);
+  for (long long i = 0; i <= n; ++i) {
+    // Rounded to 1e-9° so that manifests written and read back compare exactly.
+    double a = from_deg + dir * static_cast<double>(i) * step_deg;
+    angles.push_back(std::round(a * 1e9) / 1e9);
+  }
+  return angles;
+}
+
+CapturePlan CapturePlan::FromRig(const Rig& rig) {
+  CapturePlan p;
+  p.from_deg = rig.capture.from_deg;
+  p.to_deg = rig.capture.to_deg;
+  p.step_deg = rig.capture.step_deg;
+  p.exposures_s = rig.capture.exposures_s;
+  p.dark_frames = rig.capture.dark_frames;
+  p.iso = rig.capture.iso;
+  p.f_number = rig.capture.f_number;
+  p.max_retries = rig.capture.max_retries;
+  p.retry_delay_s = rig.capture.retry_delay_s;
+  return p;
+}
+
+MergeOptions mergeOptionsForRig(const Rig& rig, double iso) {
+  MergeOptions m;
+  m.gain_e_per_dn = rig.sensor.gainEPerDn(iso);
+  m.read_noise_e = rig.sensor.read_noise_e;
+  if (rig.camera_driver == CameraDriver::kSimulated)
+    m.output_scale = rig.sensor.electrons_per_unit_s;
+  return m;
+}
+
+std::string CaptureSummary::BriefReport() const {
+  std::ostringstream s;
+  s << "Capture " << termination << ": " << (frames_already_done + frames_captured) << " of "
+    << frames_planned << " frames";
+  if (frames_already_done) s << " (" << frames_already_done << " from before the resume)";
+  s << ", " << exposures_taken << " exposures in " << formatDuration(seconds);
+  if (frames_captured > 0 && seconds > 0) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, " (%.2f frames/s)", frames_captured / seconds);
+    s << buf;
+  }
+  s << "; " << camera_retries << " camera and " << head_retries << " head retries";
+  if (saturated_photosites) s << "; " << saturated_photosites << " photosites saturated in every exposure";
+  if (!warnings.empty()) s << "; " << warnings.size() << " warnings";
+  s << ". Manifest: " << manifest.string() << ".";
+  return s.str();
+}
+
+namespace {
+
+std::string frameName(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "frame_%04d", index);
+  return buf;
+}
+
+std::string headName(HeadDriver d) {
+  switch (d) {
+    case HeadDriver::kSimulated: return "simulated";
+    case HeadDriver::kGpioStepper: return "gpio_stepper";
+    case HeadDriver::kTic: return "tic";
+  }
+  return "?";
+}
+
+class Session {
+ public:
+  Session(const Rig& rig, RigDevices& devices, const CapturePlan& plan, const fs::path& out,
+          const CaptureOptions& options)
+      : rig_(rig), dev_(devices), plan_(plan), out_(out), options_(options) {}
+
+  CaptureSummary run();
+
+ private:
+  Json newManifest() const;
+  void checkResume(const Json& old) const;
+  void writeManifest() { writeJsonFile(out_ / "manifest.json", manifest_); }
+  template <class F>
+  auto retry(const std::string& what, bool camera, int index, F&& fn) -> decltype(fn());
+  [[noreturn]] void failPersistently(const std::string& what, int index, const DeviceError& e);
+  void captureDarks();
+  void captureFrame(int index, double angle_deg);
+
+  const Rig& rig_;
+  RigDevices& dev_;
+  const CapturePlan& plan_;
+  fs::path out_;
+  CaptureOptions options_;
+  Json manifest_;
+  std::vector<double> angles_;
+  std::vector<cv::Mat> darks_;
+  MergeOptions merge_;
+  CaptureSummary summary_;
+  int attempts_ = 0;
+  SimulatedCamera* sim_camera_ = nullptr;
+  std::string lens_name_;
+  double pixel_pitch_um_ = 0;
+};
+
+Json Session::newManifest() const {
+  Json m;
+  m["format"] = "flarekit.capture";
+  m["version"] = 1;
+  m["status"] = "in_progress";
+  m["rig"] = {{"name", rig_.name},
+              {"file", rig_.file.string()},
+              {"head", headName(rig_.head_driver)},
+              {"camera", rig_.camera_driver == CameraDriver::kSimulated ? "simulated" : "gphoto2"},
+              {"simulated", rig_.simulated()}};
+  m["lens"] = {{"name", lens_name_},
+               {"file", rig_.camera_driver == CameraDriver::kSimulated
+                            ? rig_.simulation.lens.string()
+                            : std::string()}};
+  const double white = rig_.sensor.white_level_dn > 0
+                           ? rig_.sensor.white_level_dn
+                           : std::ldexp(1.0, rig_.sensor.bit_depth) - 1;
+  m["camera"] = {{"description", dev_.camera->describe()},
+                 {"iso", plan_.iso},
+                 {"f_number", plan_.f_number},
+                 {"exposures_s", plan_.exposures_s},
+                 {"cfa", std::string(cfaName(rig_.sensor.cfa))},
+                 {"black_level_dn", rig_.sensor.black_level_dn},
+                 {"white_level_dn", white},
+                 {"gain_e_per_dn", merge_.gain_e_per_dn},
+                 {"read_noise_e", merge_.read_noise_e}};
+  m["head"] = dev_.head->describe();
+  m["light"] = rig_.light;
+  m["image"] = {{"width", 0},
+                {"height", 0},
+                {"channels", rig_.sensor.cfa == Cfa::kMono ? "Y" : "RGB"},
+                {"pixel_pitch_um", pixel_pitch_um_},
+                {"units", rig_.camera_driver == CameraDriver::kSimulated
+                              ? "relative irradiance (render units)"
+                              : "electrons/s"}};
+  m["plan"] = {{"from_deg", plan_.from_deg}, {"to_deg", plan_.to_deg},
+               {"step_deg", plan_.step_deg}, {"angles_deg", angles_},
+               {"exposures_s", plan_.exposures_s}, {"dark_frames", plan_.dark_frames},
+               {"keep_raw", plan_.keep_raw}};
+  m["truth"] = sim_camera_ != nullptr && options_.write_truth;
+  m["frames"] = Json::array();
+  m["darks"] = Json::array();
+  m["frames_done"] = 0;
+  m["frames_planned"] = static_cast<int>(angles_.size());
+  return m;
+}
+
+void Session::checkResume(const Json& old) const {
+  const std::string file = (out_ / "manifest.json").string();
+  auto differs = [&](const std::string& what, const Json& a, const Json& b) {
+    if (a != b)
+      throw InputError(file, "cannot resume: the " + what + " differs from the stopped session (" +
+                                 a.dump() + " there, " + b.dump() + " now); resume with the same "
+                                 "rig and options, or capture into a new folder");
+  };
+  const Json fresh = newManifest();
+  differs("rig name", old["rig"]["name"], fresh["rig"]["name"]);
+  differs("angle plan", old["plan"]["angles_deg"], fresh["plan"]["angles_deg"]);
+  differs("exposure bracket", old["plan"]["exposures_s"], fresh["plan"]["exposures_s"]);
+  differs("number of dark frames", old["plan"]["dark_frames"], fresh["plan"]["dark_frames"]);
+  differs("ISO", old["camera"]["iso"], fresh["camera"]["iso"]);
+  differs("f-number", old["camera"]["f_number"], fresh["camera"]["f_number"]);
+}
+
+template <class F>
+auto Session::retry(const std::string& what, bool camera, int index, F&& fn) -> decltype(fn()) {
+  for (int attempt = 0;; ++attempt) {
+    try {
+      ++attempts_;
+      return fn();
+    } catch (const DeviceError& e) {
+      if (!e.transient() || attempt >= plan_.max_retries) failPersistently(what, index, e);
+      logWarning(std::string(e.what()) + "; retrying " + what + " (" + std::to_string(attempt + 1) +
+                 " of " + std::to_string(plan_.max_retries) + ")");
+      (camera ? summary_.camera_retries : summary_.head_retries)++;
+      if (plan_.retry_delay_s > 0)
+        std::this_thread::sleep_for(std::chrono::duration<double>(plan_.retry_delay_s));
+      try {
+        if (camera)
+          dev_.camera->reconnect();
+        else
+          dev_.head->reconnect();
+      } catch (const DeviceError&) {
+        // The next attempt reports the problem.
+      }
+    }
+  }
+}
+
+void Session::failPersistently(const std::string& what, int index, const DeviceError& e) {
+  std::ostringstream where;
+  if (index >= 0)
+    where << " at frame " << index << " (" << angles_[index] << "°)";
+  std::string message = what + " failed" + where.str() + ": " + e.what() + ". The session in " +
+                        out_.string() + " is saved (" +
+                        std::to_string(manifest_["frames"].size()) + " of " +
+                        std::to_string(angles_.size()) +
+                        " frames done): fix the device, then run flarekit capture --rig " +
+                        rig_.file.string() + " --out " + out_.string() + " --resume";
+  manifest_["status"] = "failed";
+  manifest_["error"] = message;
+  writeManifest();
+  throw RuntimeError(message);
+}
+
+void Session::captureDarks() {
+  if (plan_.dark_frames <= 0) return;
+  const auto& old = manifest_["darks"];
+  if (old.size() == plan_.exposures_s.size()) {
+    bool all = true;
+    for (const auto& d : old) all = all && fs::exists(out_ / d["file"].get<std::string>());
+    if (all) {
+      for (const auto& d : old) darks_.push_back(readExrLayer(out_ / d["file"].get<std::string>(), ""));
+      return;
+    }
+  }
+  logInfo("Taking " + std::to_string(plan_.dark_frames) + " dark frames per exposure");
+  fs::create_directories(out_ / "darks");
+  Json entries = Json::array();
+  for (size_t k = 0; k < plan_.exposures_s.size(); ++k) {
+    const double t = plan_.exposures_s[k];
+    cv::Mat sum;
+    for (int j = 0; j < plan_.dark_frames; ++j) {
+      RawFrame f = retry("dark frame", true, -1, [&] {
+        dev_.camera->setExposure(t);
+        return dev_.camera->captureDark();
+      });
+      ++summary_.exposures_taken;
+      cv::Mat v;
+      f.data.convertTo(v, CV_32F);
+      if (sum.empty())
+        sum = v;
+      else
+        sum += v;
+    }
+    sum /= plan_.dark_frames;
+    const std::string file = "darks/dark_" + std::to_string(k) + ".exr";
+    writeExr(out_ / file, sum, {{"flarekit.exposure_s", t}, {"flarekit.units", std::string("DN")}});
+    darks_.push_back(sum);
+    entries.push_back({{"exposure_s", t}, {"file", file}, {"frames", plan_.dark_frames}});
+  }
+  manifest_["darks"] = entries;
+  writeManifest();
+}
+
+void Session::captureFrame(int index, double angle_deg) {
+  attempts_ = 0;
+  retry("moving the head to " + std::to_string(angle_deg) + "°", false, index,
+        [&] { dev_.head->moveTo(angle_deg); });
+  std::vector<RawFrame> bracket;
+  for (double t : plan_.exposures_s) {
+    bracket.push_back(retry("capturing the " + std::to_string(t) + " s exposure", true, index, [&] {
+      dev_.camera->setExposure(t);
+      return dev_.camera->capture();
+    }));
+    ++summary_.exposures_taken;
+  }
+  MergeResult merged = mergeBracket(bracket, merge_, darks_);
+  for (const auto& w : merged.warnings) {
+    logWarning("frame " + std::to_string(index) + ": " + w);
+    summary_.warnings.push_back("frame " + std::to_string(index) + ": " + w);
+  }
+  FrameMetadata meta;
+  meta.angle_deg = angle_deg;
+  meta.has_angle = true;
+  for (const auto& f : bracket) meta.exposures_s.push_back(f.exposure_s);
+  meta.iso = bracket[0].iso > 0 ? bracket[0].iso : plan_.iso;
+  meta.f_number = bracket[0].f_number > 0 ? bracket[0].f_number : plan_.f_number;
+  meta.camera = bracket[0].camera;
+  meta.lens = lens_name_;
+  meta.rig = rig_.name;
+  meta.pixel_pitch_um = pixel_pitch_um_;
+  meta.units = manifest_["image"]["units"].get<std::string>();
+  const std::string name = frameName(index);
+  Json entry = {{"index", index},
+                {"angle_deg", angle_deg},
+                {"file", "frames/" + name + ".exr"},
+                {"exposures_s", meta.exposures_s},
+                {"saturated_photosites", merged.saturated_count}};
+  Json ratios = Json::array();
+  for (const auto& c : merged.ratio_checks) ratios.push_back(c.measured_ratio);
+  entry["exposure_ratios"] = ratios;
+
+  if (plan_.keep_raw) {
+    fs::create_directories(out_ / "raw");
+    Json raws = Json::array();
+    for (size_t k = 0; k < bracket.size(); ++k) {
+      const std::string file = "raw/" + name + "_e" + std::to_string(k) + ".png";
+      writeFileAtomically(out_ / file, [&](const fs::path& tmp) {
+        if (!cv::imwrite(tmp.string(), bracket[k].data))
+          throw RuntimeError(tmp.string() + ": cannot write the RAW frame");
+      });
+      raws.push_back({{"file", file}, {"exposure_s", bracket[k].exposure_s}});
+    }
+    entry["raw_files"] = raws;
+  }
+  if (sim_camera_ && options_.write_truth) {
+    ExrImage truth = sim_camera_->scene().truth(angle_deg);
+    ExrImage main, ghosts;
+    main.attributes = truth.attributes;
+    ghosts.attributes = truth.attributes;
+    for (auto& layer : truth.layers) (layer.name.empty() ? main : ghosts).layers.push_back(layer);
+    main.attributes["flarekit.angle_deg"] = angle_deg;
+    ghosts.attributes["flarekit.angle_deg"] = angle_deg;
+    fs::create_directories(out_ / "truth");
+    writeExr(out_ / ("truth/" + name + ".exr"), main);
+    entry["truth_file"] = "truth/" + name + ".exr";
+    if (!ghosts.layers.empty()) {
+      ExrWriteOptions half;
+      half.pixel_type = ExrPixelType::kHalf;
+      writeExr(out_ / ("truth/" + name + ".ghosts.exr"), ghosts, half);
+      entry["ghosts_file"] = "truth/" + name + ".ghosts.exr";
+    }
+  }
+  // The frame last: the manifest lists a frame only after all its files are whole.
+  writeExr(out_ / ("frames/" + name + ".exr"), mergedToExr(merged, meta));
+  entry["attempts"] = attempts_;
+  manifest_["image"]["width"] = bracket[0].data.cols;
+  manifest_["image"]["height"] = bracket[0].data.rows;
+  manifest_["frames"].push_back(entry);
+  manifest_["frames_done"] = static_cast<int>(manifest_["frames"].size());
+  writeManifest();
+  summary_.saturated_photosites += merged.saturated_count;
+}
+
+CaptureSummary Session::run() {
+  const auto start = std::chrono::steady_clock::now();
+  std::string error;
+  if (!plan_.IsValid(&error)) throw InputError("capture plan: " + error);
+  angles_ = plan_.anglesDeg();
+  for (double a : angles_)
+    if (rig_.head_driver == HeadDriver::kGpioStepper || rig_.head_driver == HeadDriver::kTic) {
+      const auto& g = rig_.head_driver == HeadDriver::kTic ? rig_.tic.geometry : rig_.gpio.geometry;
+      if (a < g.min_deg || a > g.max_deg)
+        throw InputError(rig_.file.string(), "head.soft_limits_deg: the plan's angle " +
+                                                 std::to_string(a) + "° lies outside the soft limits");
+    }
+  merge_ = mergeOptionsForRig(rig_, plan_.iso);
+  sim_camera_ = dynamic_cast<SimulatedCamera*>(dev_.camera.get());
+  if (sim_camera_) {
+    lens_name_ = sim_camera_->scene().lensName();
+    pixel_pitch_um_ = sim_camera_->scene().pixelPitchUm();
+  } else {
+    pixel_pitch_um_ = rig_.sensor.pixel_pitch_um;
+  }
+
+  const fs::path manifest_path = out_ / "manifest.json";
+  std::set<int> done;
+  if (options_.resume) {
+    if (!fs::exists(manifest_path))
+      throw InputError(out_.string() + ": no capture to resume (no manifest.json)");
+    ConfigNode root = loadJsonFile(manifest_path);
+    checkFormat(root, "flarekit.capture", 1);
+    Json old = root.json();
+    checkResume(old);
+    manifest_ = newManifest();
+    manifest_["darks"] = old.value("darks", Json::array());
+    manifest_["image"] = old.value("image", manifest_["image"]);
+    for (const auto& f : old["frames"]) {
+      const int index = f.value("index", -1);
+      const std::string file = f.value("file", "");
+      if (index < 0 || index >= static_cast<int>(angles_.size()) || done.count(index)) continue;
+      if (!fs::exists(out_ / file)) continue;  // lost: capture again
+      done.insert(index);
+      manifest_["frames"].push_back(f);
+    }
+    summary_.frames_already_done = static_cast<int>(done.size());
+    logInfo("Resuming " + out_.string() + ": " + std::to_string(done.size()) + " of " +
+            std::to_string(angles_.size()) + " frames done");
+  } else {
+    if (fs::exists(manifest_path))
+      throw InputError(out_.string() +
+                       ": already holds a capture (manifest.json); add --resume to continue it, "
+                       "or choose another folder");
+    if (fs::exists(out_) && !fs::is_directory(out_))
+      throw InputError(out_.string() + ": exists and is not a folder");
+    manifest_ = newManifest();
+  }
+  fs::create_directories(out_ / "frames");
+  manifest_["frames_done"] = static_cast<int>(manifest_["frames"].size());
+  writeManifest();
+
+  summary_.frames_planned = static_cast<int>(angles_.size());
+  summary_.manifest = manifest_path;
+  // Sorted frames in plan order (resume may have appended out of order).
+  auto sortFrames = [&] {
+    auto& frames = manifest_["frames"];
+    std::sort(frames.begin(), frames.end(),
+              [](const Json& a, const Json& b) { return a["index"] < b["index"]; });
+  };
+
+  retry("setting the camera", true, -1, [&] {
+    dev_.camera->setIso(plan_.iso);
+    dev_.camera->setAperture(plan_.f_number);
+  });
+  retry("homing the head", false, -1, [&] { dev_.head->home(); });
+  captureDarks();
+
+  const int remaining = static_cast<int>(angles_.size() - done.size());
+  bool interrupted = false;
+  {
+    Progress progress("capture", remaining);
+    for (int i = 0; i < static_cast<int>(angles_.size()); ++i) {
+      if (done.count(i)) continue;
+      if (options_.stop_requested && options_.stop_requested->load()) {
+        interrupted = true;
+        break;
+      }
+      captureFrame(i, angles_[i]);
+      sortFrames();
+      ++summary_.frames_captured;
+      if (options_.progress) progress.advance();
+    }
+  }
+  summary_.termination = interrupted ? "interrupted" : "complete";
+  manifest_["status"] = summary_.termination;
+  manifest_.erase("error");
+  writeManifest();
+  summary_.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary_;
+}
+
+}  // namespace
+
+CaptureSummary runCapture(const Rig& rig, RigDevices& devices, const CapturePlan& plan,
+                          const fs::path& out, const CaptureOptions& options) {
+  if (!devices.head || !devices.camera) throw std::logic_error("runCapture: devices not open");
+  Session session(rig, devices, plan, out, options);
+  return session.run();
+}
+
+}  // namespace flarekit::acquisition

@@ -1,0 +1,108 @@
+#pragma once
+// Capture sessions (Walch et al. 2018 §3.1): rotate the camera in steps away from a point light,
+// bracket exposures at every step, merge them to HDR and store one OpenEXR frame per angle.
+//
+// ── Capture folder layout ─────────────────────────────────────────────────────────────────────
+//   DIR/manifest.json            the session (below); rewritten atomically after every frame
+//   DIR/frames/frame_NNNN.exr    merged HDR frame of plan angle NNNN (0-based, plan order):
+//                                  main layer "Y" (mono sensor) or "R","G","B" (Bayer sensor,
+//                                  bilinear demosaic of the merged mosaic), float32, zip;
+//                                  layer "saturated": 1 where every exposure clipped (the value
+//                                  is then only a lower bound), else 0;
+//                                  attributes flarekit.angle_deg, flarekit.exposure_s (longest),
+//                                  flarekit.exposures_s, flarekit.iso, flarekit.f_number,
+//                                  flarekit.camera, flarekit.lens, flarekit.rig,
+//                                  flarekit.pixel_pitch_um, flarekit.units, flarekit.cfa
+//   DIR/truth/frame_NNNN.exr     simulated rigs only: the renderer's noise-free radiance in the
+//                                  frames' units and channels (float32, main layer)
+//   DIR/truth/frame_NNNN.ghosts.exr  simulated rigs only: one layer per rendered ghost,
+//                                  "ghost.<id>.Y" (or .R/.G/.B), same units, half precision;
+//                                  attributes flarekit.ghost.<id>.surfaces/.centroid_px/...
+//   DIR/darks/dark_K.exr         averaged dark frame for exposure K (float DN), --dark-frames
+//   DIR/raw/frame_NNNN_eK.png    --keep-raw: the RAW exposures as 16-bit PNG (photosite values)
+//
+// ── manifest.json (format "flarekit.capture", version 1) ─────────────────────────────────────
+//   status            "in_progress" | "complete" | "interrupted" (Ctrl-C) | "failed" (+ "error")
+//   rig               {name, file, head, camera, simulated: bool}
+//   lens              {name, file}        ("" when the rig does not know its lens)
+//   camera            {description, iso, f_number, exposures_s: [...], cfa, black_level_dn,
+//                      white_level_dn, gain_e_per_dn, read_noise_e}
+//   light             description from the rig file
+//   image             {width, height, channels: "Y" | "RGB", pixel_pitch_um, units}
+//                      units: "relative irradiance (render units)" for simulated rigs, else
+//                      "electrons/s" (merged value = electrons per second per photosite)
+//   plan              {from_deg, to_deg, step_deg, angles_deg: [...], exposures_s: [...],
+//                      dark_frames, keep_raw}
+//   truth             true when truth/ holds ground truth for every frame
+//   frames            [{index, angle_deg, file, truth_file?, ghosts_file?, raw_files?,
+//                       exposures_s, saturated_photosites, exposure_ratios: [measured...],
+//                       attempts}] in plan order, one entry per finished frame, never twice
+//   darks             [{exposure_s, file, frames}] when dark frames were taken
+//   frames_done, frames_planned
+// A frame file is written before the manifest lists it: a frame listed is whole and readable;
+// a frame file not yet listed is captured again on --resume.
+
+#include <atomic>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "acquisition/hdr_merge.h"
+#include "acquisition/rig.h"
+
+namespace flarekit::acquisition {
+
+struct CapturePlan {
+  double from_deg = 0;    // first angle
+  double to_deg = 20;     // last angle (inclusive); may be below from_deg
+  double step_deg = 0.5;  // step (> 0); (to − from)/step must be a whole number
+  std::vector<double> exposures_s{0.25, 1, 4};  // bracket (distinct, > 0)
+  int dark_frames = 0;    // dark frames averaged per exposure time (0 = black level only)
+  bool keep_raw = false;  // also store the RAW exposures under raw/
+  double iso = 100;       // camera ISO (> 0)
+  double f_number = 8;    // aperture (> 0)
+  int max_retries = 3;    // retries of a transiently failing device operation (≥ 0)
+  double retry_delay_s = 0.5;  // pause before a retry (≥ 0)
+
+  bool IsValid(std::string* error) const;
+  // The angles, from from_deg to to_deg in steps of step_deg.
+  std::vector<double> anglesDeg() const;
+  // The rig's [capture] defaults.
+  static CapturePlan FromRig(const Rig& rig);
+};
+
+struct CaptureOptions {
+  bool resume = false;  // continue the session in the output folder
+  // Checked after every frame: when set, the session stops cleanly (status "interrupted").
+  const std::atomic<bool>* stop_requested = nullptr;
+  bool progress = true;  // progress bar / lines on stderr (also subject to --quiet)
+  // Write truth/ for simulated rigs (default true).
+  bool write_truth = true;
+};
+
+struct CaptureSummary {
+  std::string termination;  // "complete" or "interrupted"
+  int frames_planned = 0;
+  int frames_already_done = 0;  // found in the manifest when resuming
+  int frames_captured = 0;      // captured by this run
+  int exposures_taken = 0;
+  int camera_retries = 0, head_retries = 0;
+  long long saturated_photosites = 0;  // over the frames of this run
+  std::vector<std::string> warnings;
+  double seconds = 0;
+  std::filesystem::path manifest;
+
+  std::string BriefReport() const;
+};
+
+// Runs (or resumes) a capture into `out`. Returns when every angle is done or after the frame
+// during which a stop was requested. Throws InputError for a bad plan, a folder that holds
+// something else, or a resume whose plan differs; RuntimeError after a device failed
+// persistently (the manifest then says "failed" and the session can be resumed).
+CaptureSummary runCapture(const Rig& rig, RigDevices& devices, const CapturePlan& plan,
+                          const std::filesystem::path& out, const CaptureOptions& options = {});
+
+// The merge options a rig implies at `iso` (gain, read noise, output scale).
+MergeOptions mergeOptionsForRig(const Rig& rig, double iso);
+
+}  // namespace flarekit::acquisition
