@@ -1,0 +1,196 @@
+#pragma once
+// Internals of the nearest-point search and the inside test, shared by signed_distance.cpp and
+// the renderer: the two upper-half segments in power form relative to the centre M, so the inner
+// loops evaluate polynomials with fused multiply-adds. Not part of the public API.
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "model/ghost_shape.h"
+#include "model/signed_distance.h"
+
+namespace flarekit::model::detail {
+
+inline constexpr int kMaxSamples = 65;
+
+// A cubic in power form, relative to M: B(t) = a0 + a1·t + a2·t² + a3·t³ (per coordinate).
+struct PowerCubic {
+  double x0, x1, x2, x3;
+  double y0, y1, y2, y3;
+
+  double x(double t) const { return ((x3 * t + x2) * t + x1) * t + x0; }
+  double y(double t) const { return ((y3 * t + y2) * t + y1) * t + y0; }
+  double dx(double t) const { return (3 * x3 * t + 2 * x2) * t + x1; }
+  double dy(double t) const { return (3 * y3 * t + 2 * y2) * t + y1; }
+  double ddx(double t) const { return 6 * x3 * t + 2 * x2; }
+  double ddy(double t) const { return 6 * y3 * t + 2 * y2; }
+};
+
+inline PowerCubic toPowerForm(const CubicBezier& b, cv::Point2d origin) {
+  const cv::Point2d p0 = b.p[0] - origin, p1 = b.p[1] - origin, p2 = b.p[2] - origin,
+                    p3 = b.p[3] - origin;
+  PowerCubic c;
+  c.x0 = p0.x;
+  c.x1 = 3 * (p1.x - p0.x);
+  c.x2 = 3 * (p2.x - 2 * p1.x + p0.x);
+  c.x3 = p3.x - 3 * p2.x + 3 * p1.x - p0.x;
+  c.y0 = p0.y;
+  c.y1 = 3 * (p1.y - p0.y);
+  c.y2 = 3 * (p2.y - 2 * p1.y + p0.y);
+  c.y3 = p3.y - 3 * p2.y + 3 * p1.y - p0.y;
+  return c;
+}
+
+// Segments 0 (P_L→P_T) and 1 (P_T→P_R) relative to M, with their coarse samples.
+struct PreparedShape {
+  double mx = 0, my = 0;    // M
+  double left = 0, right = 0, height = 0;
+  std::array<PowerCubic, 2> seg{};
+  int samples = 0;  // samples per segment
+  std::array<std::array<double, kMaxSamples>, 2> sample_x{}, sample_y{};
+
+  PreparedShape() = default;
+  PreparedShape(const GhostParameters& g, int samples_per_segment) {
+    mx = g.center_x;
+    my = g.center_y;
+    left = g.left;
+    right = g.right;
+    height = g.height;
+    const auto outline = ghostOutline(g);
+    const cv::Point2d m(mx, my);
+    seg[0] = toPowerForm(outline[0], m);
+    seg[1] = toPowerForm(outline[1], m);
+    samples = std::clamp(samples_per_segment, 3, kMaxSamples);
+    for (int s = 0; s < 2; ++s)
+      for (int k = 0; k < samples; ++k) {
+        const double t = static_cast<double>(k) / (samples - 1);
+        sample_x[s][k] = seg[s].x(t);
+        sample_y[s][k] = seg[s].y(t);
+      }
+  }
+};
+
+// The nearest point on one upper segment to the relative point (px, py): sets t and squared
+// distance. Coarse samples + safeguarded Newton on f(t) = (B − p)·B′ inside the bracket around the
+// best sample (shared/FITTING_NOTES.md: sampling then Newton is the robust choice).
+inline void nearestOnSegmentNewton(const PreparedShape& s, int which, double px, double py,
+                                   int newton_steps, double& t_out, double& d2_out) {
+  const PowerCubic& c = s.seg[which];
+  const auto& sx = s.sample_x[which];
+  const auto& sy = s.sample_y[which];
+  int best = 0;
+  double best_d2 = 1e308;
+  for (int k = 0; k < s.samples; ++k) {
+    const double dx = sx[k] - px, dy = sy[k] - py;
+    const double d2 = dx * dx + dy * dy;
+    if (d2 < best_d2) {
+      best_d2 = d2;
+      best = k;
+    }
+  }
+  const double step = 1.0 / (s.samples - 1);
+  double lo = std::max(0, best - 1) * step;
+  double hi = std::min(s.samples - 1, best + 1) * step;
+  double t = best * step;
+  for (int i = 0; i < newton_steps; ++i) {
+    const double bx = c.x(t) - px, by = c.y(t) - py;
+    const double dx = c.dx(t), dy = c.dy(t);
+    const double f = bx * dx + by * dy;  // g′(t) for g = |B − p|²/2
+    const double fp = dx * dx + dy * dy + bx * c.ddx(t) + by * c.ddy(t);
+    if (f > 0)
+      hi = t;
+    else
+      lo = t;
+    double next = (fp > 0) ? t - f / fp : 0.5 * (lo + hi);
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);  // also catches NaN
+    const double moved = std::abs(next - t);
+    t = next;
+    if (moved < 1e-10) break;
+  }
+  const double bx = c.x(t) - px, by = c.y(t) - py;
+  const double d2 = bx * bx + by * by;
+  if (d2 < best_d2) {
+    t_out = t;
+    d2_out = d2;
+  } else {
+    t_out = best * step;
+    d2_out = best_d2;
+  }
+}
+
+// The paper's "binary search, 12 iterations" (Walch 2018 §3.2), read as bisection on the sign of
+// (B − p)·B′ over [0, 1]; the ends are candidates too.
+inline void nearestOnSegmentBisection(const PreparedShape& s, int which, double px, double py,
+                                      int steps, double& t_out, double& d2_out) {
+  const PowerCubic& c = s.seg[which];
+  double lo = 0, hi = 1;
+  for (int i = 0; i < steps; ++i) {
+    const double t = 0.5 * (lo + hi);
+    const double f = (c.x(t) - px) * c.dx(t) + (c.y(t) - py) * c.dy(t);
+    if (f > 0)
+      hi = t;
+    else
+      lo = t;
+  }
+  const double candidates[3] = {0.5 * (lo + hi), 0.0, 1.0};
+  d2_out = 1e308;
+  for (double t : candidates) {
+    const double bx = c.x(t) - px, by = c.y(t) - py;
+    const double d2 = bx * bx + by * by;
+    if (d2 < d2_out) {
+      d2_out = d2;
+      t_out = t;
+    }
+  }
+}
+
+// Exact inside test on the relative, reflected point (x, y ≤ 0): pick the quarter by x, solve
+// x(t) = x on that monotone segment (safeguarded Newton to full precision), compare heights.
+inline bool insideRelative(const PreparedShape& s, double x, double y) {
+  if (x < -s.left || x > s.right || y < -s.height) return false;
+  const PowerCubic& c = s.seg[x <= 0 ? 0 : 1];
+  // x(t) is non-decreasing on [0, 1] for both segments (0: −L → 0, 1: 0 → R).
+  double lo = 0, hi = 1;
+  double t = (x <= 0) ? 1 + x / s.left : x / s.right;  // the straight-line guess
+  t = std::clamp(t, 0.0, 1.0);
+  for (int i = 0; i < 60; ++i) {
+    const double f = c.x(t) - x;
+    if (f == 0) break;
+    if (f > 0)
+      hi = t;
+    else
+      lo = t;
+    const double fp = c.dx(t);
+    double next = (fp > 0) ? t - f / fp : 0.5 * (lo + hi);
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (next == t || hi - lo <= 1e-15) break;
+    t = next;
+  }
+  // y(t) is the outline's height above M at this x (negative, y down); inside below it.
+  return y >= c.y(t);
+}
+
+// The full search on the reflected relative point; returns the upper segment (0 or 1), t and d².
+inline void nearestUpper(const PreparedShape& s, double px, double py,
+                         const SignedDistanceOptions& o, int& segment, double& t, double& d2) {
+  double t0 = 0, d20 = 0, t1 = 0, d21 = 0;
+  if (o.method == NearestPointMethod::kBisection12) {
+    nearestOnSegmentBisection(s, 0, px, py, o.bisection_steps, t0, d20);
+    nearestOnSegmentBisection(s, 1, px, py, o.bisection_steps, t1, d21);
+  } else {
+    nearestOnSegmentNewton(s, 0, px, py, o.newton_steps, t0, d20);
+    nearestOnSegmentNewton(s, 1, px, py, o.newton_steps, t1, d21);
+  }
+  if (d20 <= d21) {
+    segment = 0;
+    t = t0;
+    d2 = d20;
+  } else {
+    segment = 1;
+    t = t1;
+    d2 = d21;
+  }
+}
+
+}  // namespace flarekit::model::detail

@@ -1,0 +1,254 @@
+#include "model/flare_model.h"
+
+#include <cmath>
+#include <numbers>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+#include "common/config.h"
+#include "common/error.h"
+
+namespace flarekit::model {
+namespace {
+
+constexpr int kCheckAngles = 65;  // angles per ghost at which load checks the parameter ranges
+
+std::string formatNumber(double v) {
+  std::ostringstream s;
+  s.precision(10);
+  s << v;
+  return s.str();
+}
+
+double positiveNumber(const ConfigNode& node) {
+  const double v = node.number();
+  if (!(v > 0)) node.fail("must be positive, got " + formatNumber(v));
+  return v;
+}
+
+std::string text(const ConfigNode& node) {
+  if (!node.json().is_string()) node.fail("must be a string");
+  return node.string();
+}
+
+CaptureInfo parseCapture(const ConfigNode& c) {
+  if (!c.isObject()) c.fail("must be a table");
+  c.checkKnownKeys({"camera", "lens", "f_number", "iso", "exposure_s", "light", "image_width",
+                    "image_height", "pixel_pitch_um", "angle_step_deg"});
+  CaptureInfo info;
+  info.camera = text(c["camera"]);
+  info.lens = text(c["lens"]);
+  info.f_number = positiveNumber(c["f_number"]);
+  info.iso = positiveNumber(c["iso"]);
+  info.exposure_s = positiveNumber(c["exposure_s"]);
+  info.light = text(c["light"]);
+  for (const char* key : {"image_width", "image_height"}) {
+    const ConfigNode n = c[key];
+    const long long v = n.integer();
+    if (v <= 0 || v > 1000000) n.fail("must be a positive number of pixels, got " + std::to_string(v));
+    (std::string(key) == "image_width" ? info.image_size.width : info.image_size.height) =
+        static_cast<int>(v);
+  }
+  info.pixel_pitch_um = positiveNumber(c["pixel_pitch_um"]);
+  info.angle_step_deg = positiveNumber(c["angle_step_deg"]);
+  return info;
+}
+
+// The first problem of a ghost track (the checks load makes after parsing), or "".
+std::string trackProblem(const GhostTrack& g, int channels, std::string* key) {
+  const int n = parameterCount(channels);
+  if (static_cast<int>(g.parameters.size()) != n) {
+    *key = "parameters";
+    return "has " + std::to_string(g.parameters.size()) + " polynomials, expected " + std::to_string(n);
+  }
+  if (!std::isfinite(g.angle_min_deg)) {
+    *key = "angle_min_deg";
+    return "must be finite";
+  }
+  if (!std::isfinite(g.angle_max_deg)) {
+    *key = "angle_max_deg";
+    return "must be finite";
+  }
+  if (g.angle_max_deg < g.angle_min_deg) {
+    *key = "angle_max_deg";
+    return "empty angle range: " + formatNumber(g.angle_max_deg) + " is below angle_min_deg " +
+           formatNumber(g.angle_min_deg);
+  }
+  for (int k = 0; k < n; ++k) {
+    const auto& c = g.parameters[k].coefficients;
+    *key = "parameters." + parameterName(k, channels);
+    if (c.empty()) return "needs at least one coefficient";
+    if (static_cast<int>(c.size()) > kMaxPolynomialDegree + 1)
+      return "has degree " + std::to_string(c.size() - 1) + ", at most " +
+             std::to_string(kMaxPolynomialDegree) + " is supported";
+    for (size_t i = 0; i < c.size(); ++i)
+      if (!std::isfinite(c[i])) return "coefficient " + std::to_string(i) + " is not finite";
+  }
+  // Every parameter within its allowed range across the ghost's angle range.
+  for (int k = 0; k < n; ++k) {
+    const ParameterBounds b = parameterBounds(k, channels);
+    for (int i = 0; i < kCheckAngles; ++i) {
+      const double a = g.angle_min_deg + (g.angle_max_deg - g.angle_min_deg) * i / (kCheckAngles - 1);
+      const double v = g.parameters[k].evaluate(a);
+      if (!(v >= b.lower && v <= b.upper)) {
+        *key = "parameters." + parameterName(k, channels);
+        std::string range = "[" + formatNumber(b.lower) + ", " +
+                            (b.upper == kUnbounded ? std::string("inf") : formatNumber(b.upper)) + "]";
+        return "evaluates to " + formatNumber(v) + " at " + formatNumber(a) +
+               " deg, outside the allowed range " + range;
+      }
+    }
+  }
+  return {};
+}
+
+GhostTrack parseGhost(const ConfigNode& node, int channels) {
+  if (!node.isObject()) node.fail("must be a table");
+  node.checkKnownKeys({"id", "angle_min_deg", "angle_max_deg", "parameters"});
+  GhostTrack g;
+  const ConfigNode id = node["id"];
+  const long long v = id.integer();
+  if (v < 0 || v > 1000000000) id.fail("must be a non-negative integer, got " + std::to_string(v));
+  g.id = static_cast<int>(v);
+  g.angle_min_deg = node["angle_min_deg"].number();
+  g.angle_max_deg = node["angle_max_deg"].number();
+  const ConfigNode params = node["parameters"];
+  if (!params.isObject()) params.fail("must be a table of polynomials");
+  params.checkKnownKeys(parameterNames(channels));
+  for (const std::string& name : parameterNames(channels)) {
+    const ConfigNode p = params[name];
+    if (!p.isArray()) p.fail("must be an array of polynomial coefficients");
+    g.parameters.push_back(Polynomial{p.numbers()});
+  }
+  std::string key;
+  const std::string problem = trackProblem(g, channels, &key);
+  if (!problem.empty()) node.fail(key + ": " + problem);
+  return g;
+}
+
+}  // namespace
+
+double Polynomial::evaluate(double theta) const {
+  double v = 0;
+  for (size_t i = coefficients.size(); i-- > 0;) v = v * theta + coefficients[i];
+  return v;
+}
+
+FlareModel FlareModel::parse(const std::string& text_in, const std::string& file) {
+  const ConfigNode root = parseJson(text_in, file);
+  checkFormat(root, kFlareModelFormat, kFlareModelVersion);
+  root.checkKnownKeys({"format", "version", "capture", "channels", "ghosts"});
+  FlareModel m;
+  m.capture = parseCapture(root["capture"]);
+  const ConfigNode ch = root["channels"];
+  const long long channels = ch.integer();
+  if (channels != 1 && channels != 3) ch.fail("must be 1 (grey) or 3 (RGB), got " + std::to_string(channels));
+  m.channels = static_cast<int>(channels);
+  const ConfigNode ghosts = root["ghosts"];
+  if (!ghosts.isArray()) ghosts.fail("must be an array");
+  std::set<int> ids;
+  for (size_t i = 0; i < ghosts.size(); ++i) {
+    GhostTrack g = parseGhost(ghosts[i], m.channels);
+    if (!ids.insert(g.id).second) ghosts[i]["id"].fail("duplicate ghost id " + std::to_string(g.id));
+    m.ghosts.push_back(std::move(g));
+  }
+  return m;
+}
+
+FlareModel FlareModel::load(const std::filesystem::path& path) {
+  const ConfigNode root = loadJsonFile(path);
+  return parse(root.json().dump(), path.string());
+}
+
+bool FlareModel::IsValid(std::string* error) const {
+  auto fail = [&](const std::string& m) {
+    if (error) *error = m;
+    return false;
+  };
+  const CaptureInfo& c = capture;
+  if (!(c.f_number > 0) || !(c.iso > 0) || !(c.exposure_s > 0) || !(c.pixel_pitch_um > 0) ||
+      !(c.angle_step_deg > 0) || !std::isfinite(c.f_number) || !std::isfinite(c.iso) ||
+      !std::isfinite(c.exposure_s) || !std::isfinite(c.pixel_pitch_um) || !std::isfinite(c.angle_step_deg))
+    return fail("capture: f_number, iso, exposure_s, pixel_pitch_um and angle_step_deg must be positive");
+  if (c.image_size.width <= 0 || c.image_size.height <= 0) return fail("capture: image size must be positive");
+  if (channels != 1 && channels != 3) return fail("channels must be 1 or 3");
+  std::set<int> ids;
+  for (size_t i = 0; i < ghosts.size(); ++i) {
+    const GhostTrack& g = ghosts[i];
+    if (g.id < 0) return fail("ghosts[" + std::to_string(i) + "].id must be non-negative");
+    if (!ids.insert(g.id).second) return fail("ghosts[" + std::to_string(i) + "].id is a duplicate");
+    std::string key;
+    const std::string problem = trackProblem(g, channels, &key);
+    if (!problem.empty()) return fail("ghosts[" + std::to_string(i) + "]." + key + ": " + problem);
+  }
+  return true;
+}
+
+nlohmann::json FlareModel::toJson() const {
+  nlohmann::json j;
+  j["format"] = kFlareModelFormat;
+  j["version"] = kFlareModelVersion;
+  j["capture"] = {{"camera", capture.camera},
+                  {"lens", capture.lens},
+                  {"f_number", capture.f_number},
+                  {"iso", capture.iso},
+                  {"exposure_s", capture.exposure_s},
+                  {"light", capture.light},
+                  {"image_width", capture.image_size.width},
+                  {"image_height", capture.image_size.height},
+                  {"pixel_pitch_um", capture.pixel_pitch_um},
+                  {"angle_step_deg", capture.angle_step_deg}};
+  j["channels"] = channels;
+  nlohmann::json list = nlohmann::json::array();
+  for (const GhostTrack& g : ghosts) {
+    nlohmann::json params = nlohmann::json::object();
+    for (size_t k = 0; k < g.parameters.size(); ++k)
+      params[parameterName(static_cast<int>(k), channels)] = g.parameters[k].coefficients;
+    list.push_back({{"id", g.id},
+                    {"angle_min_deg", g.angle_min_deg},
+                    {"angle_max_deg", g.angle_max_deg},
+                    {"parameters", params}});
+  }
+  j["ghosts"] = list;
+  return j;
+}
+
+void FlareModel::save(const std::filesystem::path& path) const {
+  std::string error;
+  if (!IsValid(&error)) throw std::invalid_argument("flare model: " + error);
+  writeJsonFile(path, toJson());
+}
+
+std::vector<GhostAtAngle> FlareModel::ghostsAt(double angle_deg) const {
+  std::vector<GhostAtAngle> out;
+  for (const GhostTrack& g : ghosts) {
+    if (!g.covers(angle_deg)) continue;
+    std::vector<double> v(g.parameters.size());
+    for (size_t k = 0; k < v.size(); ++k) v[k] = g.parameters[k].evaluate(angle_deg);
+    out.push_back({g.id, clampToBounds(fromParameterVector(v, channels))});
+  }
+  return out;
+}
+
+ViewTransform FlareModel::viewAt(double roll_deg, std::optional<cv::Size> size) const {
+  const cv::Size s = size.value_or(capture.image_size);
+  ViewTransform v;
+  v.roll_rad = roll_deg * std::numbers::pi / 180.0;
+  v.scale = static_cast<double>(s.width) / capture.image_size.width;
+  v.image_center = cv::Point2d(0.5 * s.width, 0.5 * s.height);
+  v.model_center = cv::Point2d(0.5 * capture.image_size.width, 0.5 * capture.image_size.height);
+  return v;
+}
+
+cv::Mat FlareModel::render(double angle_deg, double roll_deg, std::optional<cv::Size> size,
+                           const RenderOptions& options) const {
+  const cv::Size s = size.value_or(capture.image_size);
+  std::vector<GhostParameters> params;
+  for (const GhostAtAngle& g : ghostsAt(angle_deg)) params.push_back(g.parameters);
+  return renderGhosts(params, s, channels, options, viewAt(roll_deg, size));
+}
+
+}  // namespace flarekit::model

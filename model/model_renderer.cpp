@@ -1,0 +1,373 @@
+#include "model/model_renderer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "model/detail/outline_search.h"
+#include "model/intensity.h"
+
+namespace flarekit::model {
+
+// ---------------------------------------------------------------------------------------------
+// ViewTransform
+
+ViewTransform ViewTransform::roll(double roll_rad, cv::Point2d center) {
+  ViewTransform v;
+  v.roll_rad = roll_rad;
+  v.image_center = center;
+  v.model_center = center;
+  return v;
+}
+
+cv::Point2d ViewTransform::modelFromImage(cv::Point2d p) const {
+  // Undo the counter-clockwise (as displayed, y down) rotation by φ: OpenCV's rotation matrix for
+  // +φ is [cos φ, sin φ; −sin φ, cos φ]; its inverse is the transpose.
+  const double c = std::cos(roll_rad), s = std::sin(roll_rad);
+  const double x = (p.x - image_center.x) / scale, y = (p.y - image_center.y) / scale;
+  return {model_center.x + c * x - s * y, model_center.y + s * x + c * y};
+}
+
+cv::Point2d ViewTransform::imageFromModel(cv::Point2d q) const {
+  const double c = std::cos(roll_rad), s = std::sin(roll_rad);
+  const double x = q.x - model_center.x, y = q.y - model_center.y;
+  return {image_center.x + scale * (c * x + s * y), image_center.y + scale * (-s * x + c * y)};
+}
+
+bool ViewTransform::isIdentity() const {
+  return roll_rad == 0 && scale == 1 && image_center == model_center;
+}
+
+bool ViewTransform::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (!std::isfinite(roll_rad)) return fail("roll_rad must be finite");
+  if (!(scale > 0) || !std::isfinite(scale)) return fail("scale must be positive and finite");
+  if (!std::isfinite(image_center.x) || !std::isfinite(image_center.y) ||
+      !std::isfinite(model_center.x) || !std::isfinite(model_center.y))
+    return fail("centres must be finite");
+  return true;
+}
+
+bool RenderOptions::IsValid(std::string* error) const {
+  if (!distance.IsValid(error)) return false;
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (tile_size < 8 || tile_size > 4096) return fail("tile_size must be in [8, 4096]");
+  if (block_size < 1 || block_size > tile_size) return fail("block_size must be in [1, tile_size]");
+  return true;
+}
+
+cv::Rect ghostPixelBounds(const GhostParameters& g, const ViewTransform& view) {
+  const cv::Rect2d box = outlineBounds(g);
+  const double grow = g.outside_falloff;
+  const double x0 = box.x - grow, y0 = box.y - grow;
+  const double x1 = box.x + box.width + grow, y1 = box.y + box.height + grow;
+  double lx = 1e300, ly = 1e300, hx = -1e300, hy = -1e300;
+  const cv::Point2d corners[4] = {{x0, y0}, {x1, y0}, {x0, y1}, {x1, y1}};
+  for (const auto& c : corners) {
+    const cv::Point2d p = view.imageFromModel(c);
+    lx = std::min(lx, p.x);
+    ly = std::min(ly, p.y);
+    hx = std::max(hx, p.x);
+    hy = std::max(hy, p.y);
+  }
+  if (!(lx <= hx && ly <= hy)) return {};
+  // Pixel i has its centre at i + 0.5: the centres inside [lx, hx] are i in
+  // [ceil(lx − 0.5), floor(hx − 0.5)]; one pixel of margin absorbs rounding in the transform.
+  const double limit = 1e9;
+  const double ix0 = std::clamp(std::ceil(lx - 0.5) - 1, -limit, limit);
+  const double iy0 = std::clamp(std::ceil(ly - 0.5) - 1, -limit, limit);
+  const double ix1 = std::clamp(std::floor(hx - 0.5) + 1, -limit, limit);
+  const double iy1 = std::clamp(std::floor(hy - 0.5) + 1, -limit, limit);
+  if (ix1 < ix0 || iy1 < iy0) return {};
+  return {static_cast<int>(ix0), static_cast<int>(iy0), static_cast<int>(ix1 - ix0 + 1),
+          static_cast<int>(iy1 - iy0 + 1)};
+}
+
+// ---------------------------------------------------------------------------------------------
+// Per-pixel evaluation
+
+namespace {
+
+struct PreparedGhost {
+  const GhostParameters* g = nullptr;
+  detail::PreparedShape shape;
+  cv::Rect bounds;  // ghostPixelBounds ∩ roi, image coordinates
+  int count = 0;    // parameters
+};
+
+// Everything the renderer needs at one model point.
+struct PointEval {
+  double d = 0;
+  bool inside = false;
+  int segment = 0;  // upper segment 0 or 1
+  double t = 0;
+  double bx = 0, by = 0;  // nearest point, relative reflected frame
+  double rx = 0, ry = 0;  // the point, relative reflected frame
+  bool lower = false;
+};
+
+inline void evalDistance(const detail::PreparedShape& s, cv::Point2d q,
+                         const SignedDistanceOptions& o, PointEval& e) {
+  e.rx = q.x - s.mx;
+  e.lower = q.y > s.my;
+  e.ry = -std::abs(q.y - s.my);
+  double d2 = 0;
+  detail::nearestUpper(s, e.rx, e.ry, o, e.segment, e.t, d2);
+  e.inside = detail::insideRelative(s, e.rx, e.ry);
+  const double d = std::sqrt(d2);
+  e.d = e.inside ? -d : d;
+  e.bx = s.seg[e.segment].x(e.t);
+  e.by = s.seg[e.segment].y(e.t);
+}
+
+// ∂d/∂(Mx, My, L, R, h, Cl, Cr) at the fixed nearest point (envelope theorem, FITTING_NOTES).
+inline void distanceGradient(const GhostParameters& g, const detail::PreparedShape& s,
+                             const PointEval& e, double* grad) {
+  double nx = e.rx - e.bx, ny = e.ry - e.by;
+  const double len = std::sqrt(nx * nx + ny * ny);
+  if (len > 1e-12) {
+    const double k = (e.inside ? -1.0 : 1.0) / len;
+    nx *= k;
+    ny *= k;
+  } else {  // on the outline: the outward normal (tangent turned by −90°, clockwise outline)
+    const double tx = s.seg[e.segment].dx(e.t), ty = s.seg[e.segment].dy(e.t);
+    const double tl = std::sqrt(tx * tx + ty * ty);
+    nx = tl > 0 ? ty / tl : 0;
+    ny = tl > 0 ? -tx / tl : 0;
+  }
+  // (nx, ny) = ∂d/∂(relative reflected point). The point enters as (qx − Mx, −|qy − My|).
+  grad[param::kMx] = -nx;
+  grad[param::kMy] = e.lower ? ny : -ny;
+  // Shape parameters: ∂b/∂q from the Bernstein weights of the control-point derivatives
+  // (upper segments, relative frame; see ghostOutline).
+  const double t = e.t, u = 1 - t;
+  const double b0 = u * u * u, b1 = 3 * u * u * t, b2 = 3 * u * t * t, b3 = t * t * t;
+  for (int q = param::kL; q <= param::kCr; ++q) grad[q] = 0;
+  if (e.segment == 0) {
+    const double cl = g.curvature_left;
+    // P0 = (−L, 0), P1 = (−L, −Cl·h), P2 = (−Cl·L, −h), P3 = (0, −h)
+    grad[param::kL] = -nx * (-b0 - b1 - cl * b2);
+    grad[param::kH] = -ny * (-cl * b1 - b2 - b3);
+    grad[param::kCl] = -(ny * (-g.height * b1) + nx * (-g.left * b2));
+  } else {
+    const double cr = g.curvature_right;
+    // P0 = (0, −h), P1 = (Cr·R, −h), P2 = (R, −Cr·h), P3 = (R, 0)
+    grad[param::kR] = -nx * (cr * b1 + b2 + b3);
+    grad[param::kH] = -ny * (-b0 - b1 - cr * b2);
+    grad[param::kCr] = -(nx * (g.right * b1) + ny * (-g.height * b2));
+  }
+}
+
+// Values (and, when jac != nullptr, the Jacobian row-major [channel][parameter]) of one ghost.
+inline void evalGhost(const GhostParameters& g, const detail::PreparedShape& s, cv::Point2d q,
+                      const SignedDistanceOptions& o, double* values, double* jac) {
+  PointEval e;
+  evalDistance(s, q, o, e);
+  const TransferWeights w = transferWeights(e.d, g, jac != nullptr);
+  const int channels = g.channels;
+  for (int c = 0; c < channels; ++c) values[c] = w.border * g.border[c] + w.inside * g.inside[c];
+  if (!jac) return;
+  const ParameterLayout layout{channels};
+  const int n = layout.count();
+  std::fill(jac, jac + channels * n, 0.0);
+  double grad[param::kShapeCount] = {};
+  const bool needs_shape = w.border_d_distance != 0 || w.inside_d_distance != 0;
+  if (needs_shape) distanceGradient(g, s, e, grad);
+  for (int c = 0; c < channels; ++c) {
+    double* row = jac + c * n;
+    const double di_dd = w.border_d_distance * g.border[c] + w.inside_d_distance * g.inside[c];
+    if (needs_shape)
+      for (int k = 0; k < param::kShapeCount; ++k) row[k] = di_dd * grad[k];
+    row[layout.ib(c)] = w.border;
+    row[layout.ii(c)] = w.inside;
+    const double di_df = w.border_d_falloff * g.border[c] + w.inside_d_falloff * g.inside[c];
+    const double di_de = w.border_d_exponent * g.border[c] + w.inside_d_exponent * g.inside[c];
+    row[w.is_inside ? layout.fi() : layout.fo()] = di_df;
+    row[w.is_inside ? layout.ei() : layout.eo()] = di_de;
+  }
+}
+
+void checkInputs(std::span<const GhostParameters> ghosts, int channels, const RenderOptions& options,
+                 const ViewTransform& view) {
+  if (channels != 1 && channels != 3)
+    throw std::invalid_argument("render: channels must be 1 or 3");
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument("render options: " + error);
+  if (!view.IsValid(&error)) throw std::invalid_argument("view transform: " + error);
+  for (size_t i = 0; i < ghosts.size(); ++i) {
+    if (ghosts[i].channels != channels)
+      throw std::invalid_argument("render: ghost " + std::to_string(i) + " has " +
+                                  std::to_string(ghosts[i].channels) + " channels, the image " +
+                                  std::to_string(channels));
+    if (!isValid(ghosts[i], &error))
+      throw std::invalid_argument("render: ghost " + std::to_string(i) + ": " + error);
+  }
+}
+
+// The core: adds every ghost into `image` (covering roi) and, when `derivatives` is given, fills
+// each ghost's derivative images (allocated by the caller, zeroed).
+void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& image,
+                std::vector<GhostDerivativeImages>* derivatives, const RenderOptions& options,
+                const ViewTransform& view) {
+  const int channels = image.channels();
+  std::vector<PreparedGhost> prepared;
+  prepared.reserve(ghosts.size());
+  std::vector<int> ghost_index;
+  for (size_t i = 0; i < ghosts.size(); ++i) {
+    PreparedGhost p;
+    p.g = &ghosts[i];
+    p.bounds = ghostPixelBounds(ghosts[i], view) & roi;
+    p.count = parameterCount(channels);
+    if (p.bounds.area() <= 0) continue;
+    p.shape = detail::PreparedShape(ghosts[i], options.distance.samples_per_segment);
+    prepared.push_back(p);
+    ghost_index.push_back(static_cast<int>(i));
+  }
+  if (prepared.empty() || roi.area() <= 0) return;
+
+  const int tile = options.tile_size;
+  const int tiles_x = (roi.width + tile - 1) / tile, tiles_y = (roi.height + tile - 1) / tile;
+  // Ghost lists per tile.
+  std::vector<std::vector<int>> tile_ghosts(static_cast<size_t>(tiles_x) * tiles_y);
+  for (size_t k = 0; k < prepared.size(); ++k) {
+    const cv::Rect b = prepared[k].bounds;
+    const int tx0 = (b.x - roi.x) / tile, tx1 = (b.x + b.width - 1 - roi.x) / tile;
+    const int ty0 = (b.y - roi.y) / tile, ty1 = (b.y + b.height - 1 - roi.y) / tile;
+    for (int ty = ty0; ty <= ty1; ++ty)
+      for (int tx = tx0; tx <= tx1; ++tx) tile_ghosts[static_cast<size_t>(ty) * tiles_x + tx].push_back(static_cast<int>(k));
+  }
+
+  const double inv_scale = 1.0 / view.scale;
+  const bool identity = view.isIdentity();
+  const SignedDistanceOptions& dopt = options.distance;
+  const int block = options.block_size;
+
+  auto renderTile = [&](int tile_index) {
+    const int tx = tile_index % tiles_x, ty = tile_index / tiles_x;
+    const cv::Rect tile_rect(roi.x + tx * tile, roi.y + ty * tile, tile, tile);
+    double values[3];
+    std::vector<double> jac(static_cast<size_t>(channels) * parameterCount(channels));
+    for (int k : tile_ghosts[tile_index]) {
+      const PreparedGhost& pg = prepared[k];
+      const GhostParameters& g = *pg.g;
+      const cv::Rect region = pg.bounds & tile_rect;
+      if (region.area() <= 0) continue;
+      GhostDerivativeImages* deriv = derivatives ? &(*derivatives)[ghost_index[k]] : nullptr;
+      const int n = pg.count;
+      for (int by = region.y; by < region.y + region.height; by += block) {
+        for (int bx = region.x; bx < region.x + region.width; bx += block) {
+          const int bw = std::min(block, region.x + region.width - bx);
+          const int bh = std::min(block, region.y + region.height - by);
+          // Classify the block by the distance at its centre: d is 1-Lipschitz in model pixels,
+          // and image pixels are 1/scale model pixels.
+          int mode = 0;  // 0 per pixel, 1 constant inside (d ≤ −Fi), 2 nothing (d ≥ Fo)
+          if (bw * bh > 1) {
+            const cv::Point2d centre(bx + 0.5 * bw, by + 0.5 * bh);
+            const cv::Point2d qc = identity ? centre : view.modelFromImage(centre);
+            PointEval e;
+            evalDistance(pg.shape, qc, dopt, e);
+            const double reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
+            if (e.d + reach <= -g.inside_falloff) mode = 1;
+            else if (e.d - reach >= g.outside_falloff) mode = 2;
+          }
+          if (mode == 2) continue;
+          for (int y = by; y < by + bh; ++y) {
+            float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
+            for (int x = bx; x < bx + bw; ++x, out += channels) {
+              if (mode == 1) {
+                for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(g.inside[c]);
+                if (deriv) {
+                  const ParameterLayout layout{channels};
+                  for (int c = 0; c < channels; ++c)
+                    deriv->images[layout.ii(c)].ptr<float>(y - deriv->rect.y)[(x - deriv->rect.x) * channels + c] = 1.0f;
+                }
+                continue;
+              }
+              const cv::Point2d p(x + 0.5, y + 0.5);
+              const cv::Point2d q = identity ? p : view.modelFromImage(p);
+              evalGhost(g, pg.shape, q, dopt, values, deriv ? jac.data() : nullptr);
+              for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(values[c]);
+              if (deriv) {
+                const size_t offset = static_cast<size_t>(x - deriv->rect.x) * channels;
+                for (int kk = 0; kk < n; ++kk) {
+                  float* d = deriv->images[kk].ptr<float>(y - deriv->rect.y) + offset;
+                  for (int c = 0; c < channels; ++c) d[c] = static_cast<float>(jac[c * n + kk]);
+                }
+              }
+            }
+          }
+        }
+      }
+    }
+  };
+
+  const int tile_count = tiles_x * tiles_y;
+  if (options.parallel && tile_count > 1) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, tile_count, 1), [&](const tbb::blocked_range<int>& r) {
+      for (int i = r.begin(); i != r.end(); ++i) renderTile(i);
+    });
+  } else {
+    for (int i = 0; i < tile_count; ++i) renderTile(i);
+  }
+}
+
+}  // namespace
+
+void evaluateGhost(const GhostParameters& ghost, cv::Point2d p, double* values, double* jacobian,
+                   const SignedDistanceOptions& distance, const ViewTransform& view) {
+  const detail::PreparedShape s(ghost, distance.samples_per_segment);
+  evalGhost(ghost, s, view.modelFromImage(p), distance, values, jacobian);
+}
+
+void addGhosts(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& image,
+               const RenderOptions& options, const ViewTransform& view) {
+  const int channels = image.channels();
+  checkInputs(ghosts, channels, options, view);
+  if (image.depth() != CV_32F || image.size() != roi.size())
+    throw std::invalid_argument("addGhosts: image must be CV_32F of the region's size");
+  renderInto(ghosts, roi, image, nullptr, options, view);
+}
+
+cv::Mat renderGhosts(std::span<const GhostParameters> ghosts, cv::Rect roi, int channels,
+                     const RenderOptions& options, const ViewTransform& view) {
+  checkInputs(ghosts, channels, options, view);
+  if (roi.width < 0 || roi.height < 0) throw std::invalid_argument("render: negative region size");
+  cv::Mat image(roi.size(), CV_MAKETYPE(CV_32F, channels), cv::Scalar::all(0));
+  renderInto(ghosts, roi, image, nullptr, options, view);
+  return image;
+}
+
+cv::Mat renderGhosts(std::span<const GhostParameters> ghosts, cv::Size size, int channels,
+                     const RenderOptions& options, const ViewTransform& view) {
+  return renderGhosts(ghosts, cv::Rect(0, 0, size.width, size.height), channels, options, view);
+}
+
+RenderedGhosts renderGhostsWithDerivatives(std::span<const GhostParameters> ghosts, cv::Rect roi,
+                                           int channels, const RenderOptions& options,
+                                           const ViewTransform& view) {
+  checkInputs(ghosts, channels, options, view);
+  if (roi.width < 0 || roi.height < 0) throw std::invalid_argument("render: negative region size");
+  RenderedGhosts r;
+  r.image = cv::Mat(roi.size(), CV_MAKETYPE(CV_32F, channels), cv::Scalar::all(0));
+  r.derivatives.resize(ghosts.size());
+  for (size_t i = 0; i < ghosts.size(); ++i) {
+    GhostDerivativeImages& d = r.derivatives[i];
+    d.rect = ghostPixelBounds(ghosts[i], view) & roi;
+    if (d.rect.area() <= 0) d.rect = cv::Rect(roi.x, roi.y, 0, 0);
+    d.images.resize(parameterCount(channels));
+    for (auto& m : d.images) m = cv::Mat(d.rect.size(), CV_MAKETYPE(CV_32F, channels), cv::Scalar::all(0));
+  }
+  renderInto(ghosts, roi, r.image, &r.derivatives, options, view);
+  return r;
+}
+
+}  // namespace flarekit::model
