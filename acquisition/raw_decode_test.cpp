@@ -1,0 +1,64 @@
+// LibRaw decoding of DNG files written by the test itself.
+#include "acquisition/raw_decode.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "acquisition/testing_dng.h"
+#include "common/testing.h"
+
+namespace flarekit::acquisition {
+namespace {
+
+cv::Mat pattern(int rows, int cols) {
+  cv::Mat m(rows, cols, CV_16UC1);
+  for (int y = 0; y < rows; ++y)
+    for (int x = 0; x < cols; ++x) m.at<uint16_t>(y, x) = static_cast<uint16_t>(300 + 7 * x + 13 * y);
+  return m;
+}
+
+TEST(RawDecode, ReadsBayerDngWithLevelsAndExif) {
+  testing::TempDir dir;
+  cv::Mat raw = pattern(48, 64);
+  testing::DngSpec spec;
+  spec.exposure_s = 0.25;
+  spec.iso = 200;
+  spec.f_number = 5.6;
+  testing::writeDng(dir / "a.dng", raw, spec);
+  RawFrame f = decodeRawFile(dir / "a.dng");
+  ASSERT_EQ(f.data.size(), raw.size());
+  EXPECT_EQ(f.cfa, Cfa::kRGGB);
+  EXPECT_EQ(f.black_level, 256);
+  EXPECT_EQ(f.white_level, 16383);
+  EXPECT_NEAR(f.exposure_s, 0.25, 1e-6);
+  EXPECT_NEAR(f.iso, 200, 1e-6);
+  EXPECT_NEAR(f.f_number, 5.6, 1e-3);
+  EXPECT_EQ(cv::norm(f.data, raw, cv::NORM_INF), 0.0);
+}
+
+TEST(RawDecode, NotARawFileIsAnInputErrorNamingTheFile) {
+  testing::TempDir dir;
+  std::ofstream(dir / "x.cr2") << "this is not a raw file";
+  try {
+    decodeRawFile(dir / "x.cr2");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("x.cr2"), std::string::npos);
+  }
+  EXPECT_THROW(decodeRawFile(dir / "missing.dng"), InputError);
+}
+
+TEST(RawDecode, LinearImagesMustBeSixteenBitSingleChannel) {
+  testing::TempDir dir;
+  cv::imwrite((dir / "ok.png").string(), pattern(8, 8));
+  RawFrame f = loadLinearImage(dir / "ok.png", 0.5, 0, 65535, Cfa::kMono);
+  EXPECT_EQ(f.exposure_s, 0.5);
+  cv::imwrite((dir / "eight.png").string(), cv::Mat(8, 8, CV_8UC1, cv::Scalar(3)));
+  EXPECT_THROW(loadLinearImage(dir / "eight.png", 1, 0, 255, Cfa::kMono), InputError);
+}
+
+}  // namespace
+}  // namespace flarekit::acquisition
