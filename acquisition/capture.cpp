@@ -353,7 +353,7 @@ void Session::captureFrame(int index, double angle_deg) {
     entry["raw_files"] = raws;
   }
   if (sim_camera_ && options_.write_truth) {
-    ExrImage truth = sim_camera_->scene().truth(angle_deg);
+    ExrImage truth = sim_camera_->scene().truth(angle_deg, sim_camera_->fNumber());
     ExrImage main, ghosts;
     main.attributes = truth.attributes;
     ghosts.attributes = truth.attributes;

@@ -63,14 +63,15 @@ void SimulatedHead::moveTo(double angle_deg) {
 
 SimulatedCamera::SimulatedCamera(std::shared_ptr<SimulatedStage> stage,
                                  std::shared_ptr<SceneProvider> scene, RawExposer exposer, Cfa cfa,
-                                 double black_level_dn, double white_level_dn, uint64_t seed,
+                                 double black_level_dn,
+                                 std::function<double(double)> white_level_dn, uint64_t seed,
                                  FaultConfig faults)
     : stage_(std::move(stage)),
       scene_(std::move(scene)),
       exposer_(std::move(exposer)),
       cfa_(cfa),
       black_(black_level_dn),
-      white_(white_level_dn),
+      white_(std::move(white_level_dn)),
       seed_(seed),
       faults_(faults),
       injector_(mixSeed(faults.seed, 2), "simulated camera") {}
@@ -80,9 +81,10 @@ std::string SimulatedCamera::describe() const {
 }
 
 const cv::Mat& SimulatedCamera::radianceAt(double angle_deg) {
-  if (!cached_ || cached_angle_ != angle_deg) {
-    cached_radiance_ = scene_->radiance(angle_deg);
+  if (!cached_ || cached_angle_ != angle_deg || cached_f_number_ != f_number_) {
+    cached_radiance_ = scene_->radiance(angle_deg, f_number_);
     cached_angle_ = angle_deg;
+    cached_f_number_ = f_number_;
     cached_ = true;
   }
   return cached_radiance_;
@@ -99,10 +101,10 @@ RawFrame SimulatedCamera::expose(const cv::Mat& radiance, bool dark) {
   seed = mixSeed(seed, exposure_bits);
   seed = mixSeed(seed, dark ? 1 : 0);
   RawFrame frame;
-  frame.data = exposer_(radiance, exposure_s_, seed);
+  frame.data = exposer_(radiance, exposure_s_, iso_, seed);
   frame.cfa = cfa_;
   frame.black_level = black_;
-  frame.white_level = white_;
+  frame.white_level = white_(iso_);
   frame.exposure_s = exposure_s_;
   frame.iso = iso_;
   frame.f_number = f_number_;

@@ -25,17 +25,19 @@ namespace flarekit::acquisition {
 class SceneProvider {
  public:
   virtual ~SceneProvider() = default;
-  // Linear radiance (CV_32FC1 or CV_32FC3, render units) with the light at `angle_deg`.
-  virtual cv::Mat radiance(double angle_deg) = 0;
+  // Linear radiance (CV_32FC1 or CV_32FC3, render units) with the light at `angle_deg`, seen
+  // through the lens at `f_number`.
+  virtual cv::Mat radiance(double angle_deg, double f_number) = 0;
   // Ground truth for the capture's truth/ folder: main layer = noise-free radiance in the merged
-  // frames' units, plus per-ghost layers "ghost.<id>". Empty when the scene has none.
-  virtual ExrImage truth(double angle_deg) = 0;
+  // frames' units and channels, plus per-ghost layers "ghost.<id>". Empty when the scene has none.
+  virtual ExrImage truth(double angle_deg, double f_number) = 0;
   virtual std::string lensName() const = 0;
   virtual double pixelPitchUm() const = 0;
 };
 
-// Turns radiance (render units) into a RAW frame: (radiance, exposure_s, seed) → CV_16UC1.
-using RawExposer = std::function<cv::Mat(const cv::Mat& radiance, double exposure_s, uint64_t seed)>;
+// Turns radiance (render units) into a RAW frame: (radiance, exposure_s, iso, seed) → CV_16UC1.
+using RawExposer =
+    std::function<cv::Mat(const cv::Mat& radiance, double exposure_s, double iso, uint64_t seed)>;
 
 // Shared state of the simulated head and camera: where the head points.
 struct SimulatedStage {
@@ -77,10 +79,11 @@ class SimulatedHead : public RotationHead {
 
 class SimulatedCamera : public Camera {
  public:
-  // `white_level_dn` and `black_level_dn` describe what `exposer` produces.
+  // `black_level_dn` and `white_level_dn(iso)` describe what `exposer` produces.
   SimulatedCamera(std::shared_ptr<SimulatedStage> stage, std::shared_ptr<SceneProvider> scene,
-                  RawExposer exposer, Cfa cfa, double black_level_dn, double white_level_dn,
-                  uint64_t seed, FaultConfig faults);
+                  RawExposer exposer, Cfa cfa, double black_level_dn,
+                  std::function<double(double iso)> white_level_dn, uint64_t seed,
+                  FaultConfig faults);
   std::string describe() const override;
   void setExposure(double exposure_s) override { exposure_s_ = exposure_s; }
   void setIso(double iso) override { iso_ = iso; }
@@ -89,6 +92,7 @@ class SimulatedCamera : public Camera {
   RawFrame captureDark() override;
 
   SceneProvider& scene() { return *scene_; }
+  double fNumber() const { return f_number_; }
 
  private:
   RawFrame expose(const cv::Mat& radiance, bool dark);
@@ -98,12 +102,13 @@ class SimulatedCamera : public Camera {
   std::shared_ptr<SceneProvider> scene_;
   RawExposer exposer_;
   Cfa cfa_;
-  double black_, white_;
+  double black_;
+  std::function<double(double)> white_;
   uint64_t seed_;
   FaultConfig faults_;
   FaultInjector injector_;
   double exposure_s_ = 1, iso_ = 100, f_number_ = 8;
-  double cached_angle_ = 0;
+  double cached_angle_ = 0, cached_f_number_ = 0;
   bool cached_ = false;
   cv::Mat cached_radiance_;
 };
