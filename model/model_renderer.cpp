@@ -228,7 +228,8 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
     p.bounds = ghostPixelBounds(ghosts[i], view) & roi;
     p.count = parameterCount(channels);
     if (p.bounds.area() <= 0) continue;
-    p.shape = detail::PreparedShape(ghosts[i], options.distance.samples_per_segment);
+    p.shape = detail::PreparedShape(ghosts[i], options.distance.samples_per_segment,
+                                     options.distance.max_sample_turn_deg);
     prepared.push_back(p);
     ghost_index.push_back(static_cast<int>(i));
   }
@@ -324,7 +325,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
 
 void evaluateGhost(const GhostParameters& ghost, cv::Point2d p, double* values, double* jacobian,
                    const SignedDistanceOptions& distance, const ViewTransform& view) {
-  const detail::PreparedShape s(ghost, distance.samples_per_segment);
+  const detail::PreparedShape s(ghost, distance.samples_per_segment, distance.max_sample_turn_deg);
   evalGhost(ghost, s, view.modelFromImage(p), distance, values, jacobian);
 }
 

@@ -13,6 +13,8 @@ bool SignedDistanceOptions::IsValid(std::string* error) const {
   };
   if (samples_per_segment < 3 || samples_per_segment > detail::kMaxSamples)
     return fail("samples_per_segment must be in [3, 65]");
+  if (!(max_sample_turn_deg > 0 && max_sample_turn_deg <= 180))
+    return fail("max_sample_turn_deg must be in (0, 180]");
   if (newton_steps < 1 || newton_steps > 100) return fail("newton_steps must be in [1, 100]");
   if (bisection_steps < 1 || bisection_steps > 60) return fail("bisection_steps must be in [1, 60]");
   if (method != NearestPointMethod::kSampledNewton && method != NearestPointMethod::kBisection12)
@@ -22,7 +24,7 @@ bool SignedDistanceOptions::IsValid(std::string* error) const {
 
 NearestPoint nearestPoint(const GhostParameters& shape, cv::Point2d p,
                           const SignedDistanceOptions& options) {
-  const detail::PreparedShape s(shape, options.samples_per_segment);
+  const detail::PreparedShape s(shape, options.samples_per_segment, options.max_sample_turn_deg);
   // Reflect into the upper half (y ≤ My), where the nearest point lies on segment 0 or 1.
   const double rx = p.x - s.mx;
   const bool lower = p.y > s.my;

@@ -8,8 +8,9 @@
 // those two are searched (shared/FITTING_NOTES.md).
 //
 // The search: the stationarity condition (B(t) − p)·B′(t) = 0 is a quintic in t. The default
-// method takes coarse samples of each segment, then runs a safeguarded Newton iteration on that
-// condition inside the bracket around the best sample (Newton steps that leave the bracket or do
+// method takes coarse samples of each segment (evenly spaced in t, plus more where the outline
+// turns sharply), then runs a safeguarded Newton iteration on that condition inside the bracket
+// around every local minimum of the sampled distances (Newton steps that leave the bracket or do
 // not descend fall back to bisection), as production SDF code does (msdfgen, FreeType).
 // The paper says "binary search, 12 iterations" without saying on what; kBisection12 implements
 // the reading that works best in shared/FITTING_NOTES.md (bisection on the sign of
@@ -39,11 +40,14 @@ enum class NearestPointMethod {
 struct SignedDistanceOptions {
   // How the nearest point on each segment is found.
   NearestPointMethod method = NearestPointMethod::kSampledNewton;
-  // kSampledNewton: number of samples per searched segment, ends included (≥ 3).
+  // kSampledNewton: evenly spaced samples per searched segment, ends included (3 to 65).
   int samples_per_segment = 9;
+  // kSampledNewton: more samples are added where the outline turns by more than this between two
+  // samples (degrees, > 0), up to 65 per segment: long thin shapes turn sharply near their tips.
+  double max_sample_turn_deg = 10;
   // kSampledNewton: maximum safeguarded Newton steps after the samples (≥ 1). The iteration
   // stops early when the step is below 1e-10 in t.
-  int newton_steps = 8;
+  int newton_steps = 24;
   // kBisection12: number of halvings (the paper's 12).
   int bisection_steps = 12;
 

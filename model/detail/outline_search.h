@@ -42,16 +42,32 @@ inline PowerCubic toPowerForm(const CubicBezier& b, cv::Point2d origin) {
   return c;
 }
 
-// Segments 0 (P_L→P_T) and 1 (P_T→P_R) relative to M, with their coarse samples.
+// The unit tangent direction of a power-form cubic at t (B′, or B″ where B′ vanishes, as at the
+// ends of Cl = 0 segments).
+inline cv::Point2d tangentDirection(const PowerCubic& c, double t) {
+  double x = c.dx(t), y = c.dy(t);
+  double len = std::sqrt(x * x + y * y);
+  if (len < 1e-12 * (1 + std::abs(c.x1) + std::abs(c.y1) + std::abs(c.x2) + std::abs(c.y2))) {
+    x = c.ddx(t);
+    y = c.ddy(t);
+    len = std::sqrt(x * x + y * y);
+  }
+  return len > 0 ? cv::Point2d(x / len, y / len) : cv::Point2d(0, 0);
+}
+
+// Segments 0 (P_L→P_T) and 1 (P_T→P_R) relative to M, with their coarse samples: at least
+// `samples_per_segment` evenly spaced in t, then intervals halved until the outline turns by at
+// most `max_turn_deg` between neighbours (Bézier speed varies a lot on long thin shapes, and a
+// sharp turn between two samples can hide a whole basin of the distance). Capped at kMaxSamples.
 struct PreparedShape {
   double mx = 0, my = 0;    // M
   double left = 0, right = 0, height = 0;
   std::array<PowerCubic, 2> seg{};
-  int samples = 0;  // samples per segment
-  std::array<std::array<double, kMaxSamples>, 2> sample_x{}, sample_y{};
+  std::array<int, 2> samples{};  // samples per segment
+  std::array<std::array<double, kMaxSamples>, 2> sample_t{}, sample_x{}, sample_y{};
 
   PreparedShape() = default;
-  PreparedShape(const GhostParameters& g, int samples_per_segment) {
+  PreparedShape(const GhostParameters& g, int samples_per_segment, double max_turn_deg = 10) {
     mx = g.center_x;
     my = g.center_y;
     left = g.left;
@@ -61,61 +77,100 @@ struct PreparedShape {
     const cv::Point2d m(mx, my);
     seg[0] = toPowerForm(outline[0], m);
     seg[1] = toPowerForm(outline[1], m);
-    samples = std::clamp(samples_per_segment, 3, kMaxSamples);
-    for (int s = 0; s < 2; ++s)
-      for (int k = 0; k < samples; ++k) {
-        const double t = static_cast<double>(k) / (samples - 1);
-        sample_x[s][k] = seg[s].x(t);
-        sample_y[s][k] = seg[s].y(t);
+    const int uniform = std::clamp(samples_per_segment, 3, kMaxSamples);
+    const double cos_max = std::cos(std::clamp(max_turn_deg, 0.1, 180.0) * 3.14159265358979323846 / 180);
+    for (int s = 0; s < 2; ++s) {
+      std::array<double, kMaxSamples> ts{};
+      int n = uniform;
+      for (int k = 0; k < n; ++k) ts[k] = static_cast<double>(k) / (n - 1);
+      // Halve the interval that turns the most until every one turns by at most max_turn_deg.
+      while (n < kMaxSamples) {
+        int worst = -1;
+        double worst_cos = cos_max;
+        for (int k = 0; k + 1 < n; ++k) {
+          const cv::Point2d a = tangentDirection(seg[s], ts[k]), b = tangentDirection(seg[s], ts[k + 1]);
+          const double cosine = a.x * b.x + a.y * b.y;
+          if (cosine < worst_cos) {
+            worst_cos = cosine;
+            worst = k;
+          }
+        }
+        if (worst < 0) break;
+        for (int k = n; k > worst + 1; --k) ts[k] = ts[k - 1];
+        ts[worst + 1] = 0.5 * (ts[worst] + ts[worst + 2]);
+        ++n;
       }
+      samples[s] = n;
+      for (int k = 0; k < n; ++k) {
+        sample_t[s][k] = ts[k];
+        sample_x[s][k] = seg[s].x(ts[k]);
+        sample_y[s][k] = seg[s].y(ts[k]);
+      }
+    }
   }
 };
 
+// Safeguarded Newton on f(t) = (B − p)·B′ = g′(t), g = |B − p|²/2, from t inside the bracket
+// [lo, hi] that holds a local minimum of g: Newton steps that descend and stay in the bracket,
+// bisection on the sign of f otherwise. Returns t; d2 receives g·2 there.
+inline double refineNearest(const PowerCubic& c, double px, double py, double lo, double hi, double t,
+                            int newton_steps, double& d2) {
+  for (int i = 0; i < newton_steps; ++i) {
+    const double bx = c.x(t) - px, by = c.y(t) - py;
+    const double dx = c.dx(t), dy = c.dy(t);
+    const double f = bx * dx + by * dy;
+    const double fp = dx * dx + dy * dy + bx * c.ddx(t) + by * c.ddy(t);
+    if (f > 0)
+      hi = t;
+    else if (f < 0)
+      lo = t;
+    else if (fp > 0)
+      break;  // a minimum (f = 0 with fp ≤ 0 is a maximum, or an end where B′ = 0: go on)
+    double next = (fp > 0) ? t - f / fp : lo - 1;
+    if (!(next >= lo && next <= hi)) next = 0.5 * (lo + hi);  // also catches NaN
+    const double moved = std::abs(next - t);
+    t = next;
+    if (moved < 1e-13) break;
+  }
+  const double bx = c.x(t) - px, by = c.y(t) - py;
+  d2 = bx * bx + by * by;
+  return t;
+}
+
 // The nearest point on one upper segment to the relative point (px, py): sets t and squared
-// distance. Coarse samples + safeguarded Newton on f(t) = (B − p)·B′ inside the bracket around the
-// best sample (shared/FITTING_NOTES.md: sampling then Newton is the robust choice).
+// distance. Coarse samples, then safeguarded Newton from every local minimum of the sampled
+// distances (shared/FITTING_NOTES.md: sampling then Newton is the robust choice; starting from
+// every sampled minimum, not just the best, keeps the right basin on long thin shapes, where
+// inside points see several local minima).
 inline void nearestOnSegmentNewton(const PreparedShape& s, int which, double px, double py,
                                    int newton_steps, double& t_out, double& d2_out) {
   const PowerCubic& c = s.seg[which];
   const auto& sx = s.sample_x[which];
   const auto& sy = s.sample_y[which];
-  int best = 0;
-  double best_d2 = 1e308;
-  for (int k = 0; k < s.samples; ++k) {
+  const int n = s.samples[which];
+  const auto& st = s.sample_t[which];
+  std::array<double, kMaxSamples> d2s;
+  for (int k = 0; k < n; ++k) {
     const double dx = sx[k] - px, dy = sy[k] - py;
-    const double d2 = dx * dx + dy * dy;
-    if (d2 < best_d2) {
-      best_d2 = d2;
-      best = k;
+    d2s[k] = dx * dx + dy * dy;
+  }
+  t_out = 0;
+  d2_out = 1e308;
+  for (int k = 0; k < n; ++k) {
+    const bool left_ok = k == 0 || d2s[k] <= d2s[k - 1];
+    const bool right_ok = k == n - 1 || d2s[k] < d2s[k + 1];
+    if (!left_ok || !right_ok) continue;
+    if (d2s[k] < d2_out) {  // the sample itself is a candidate
+      d2_out = d2s[k];
+      t_out = st[k];
     }
-  }
-  const double step = 1.0 / (s.samples - 1);
-  double lo = std::max(0, best - 1) * step;
-  double hi = std::min(s.samples - 1, best + 1) * step;
-  double t = best * step;
-  for (int i = 0; i < newton_steps; ++i) {
-    const double bx = c.x(t) - px, by = c.y(t) - py;
-    const double dx = c.dx(t), dy = c.dy(t);
-    const double f = bx * dx + by * dy;  // g′(t) for g = |B − p|²/2
-    const double fp = dx * dx + dy * dy + bx * c.ddx(t) + by * c.ddy(t);
-    if (f > 0)
-      hi = t;
-    else
-      lo = t;
-    double next = (fp > 0) ? t - f / fp : 0.5 * (lo + hi);
-    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);  // also catches NaN
-    const double moved = std::abs(next - t);
-    t = next;
-    if (moved < 1e-10) break;
-  }
-  const double bx = c.x(t) - px, by = c.y(t) - py;
-  const double d2 = bx * bx + by * by;
-  if (d2 < best_d2) {
-    t_out = t;
-    d2_out = d2;
-  } else {
-    t_out = best * step;
-    d2_out = best_d2;
+    double d2 = 0;
+    const double t = refineNearest(c, px, py, st[std::max(0, k - 1)], st[std::min(n - 1, k + 1)],
+                                   st[k], newton_steps, d2);
+    if (d2 < d2_out) {
+      d2_out = d2;
+      t_out = t;
+    }
   }
 }
 
