@@ -4,6 +4,7 @@
 // coordinates (u, v) of each ray, normalised so the stop's semi-aperture is 1).
 
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -31,6 +32,13 @@ class Aperture {
  public:
   explicit Aperture(const ApertureShape& shape);
   float transmission(float u, float v) const;
+  // Signed distance to the edge in aperture units (> 0 inside) for circles and polygons (with
+  // rounding: the blend of the polygon's and the circle's distance functions); masks have none.
+  bool hasDistance() const { return shape_.kind != ApertureKind::kMask; }
+  float signedDistance(float u, float v) const;
+  // Antialiased transmission for a pixel whose footprint spans `footprint` aperture units:
+  // clamp(0.5 + distance / footprint, 0, 1); masks are sampled bilinearly.
+  float coverage(float u, float v, float footprint) const;
   // A size×size image of the transmission over [−1, 1]² (for the starburst FFT and previews).
   cv::Mat raster(int size) const;
   const ApertureShape& shape() const { return shape_; }

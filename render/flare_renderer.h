@@ -107,9 +107,10 @@ struct GhostRecord {
   int surface_a = 0;  // first reflection (the later surface, index into Lens::surfaces)
   int surface_b = 0;  // second reflection (b < a)
   double intensity_estimate = 0.0;  // ranking estimate (relative to E_in)
-  // Measured on the rendered ghost (luminance of its image): energy = Σ pixel luminance (in
-  // relative irradiance × pixels), centroid and bounding box of the pixels above 1e-4 of its peak
-  // (bbox empty when the ghost is off the image).
+  // Measured on the rendered ghost layer (luminance of its image), so only filled when
+  // FlareRenderOptions::ghost_layers: energy = Σ pixel luminance (relative irradiance × pixels),
+  // luminance centroid, and bounding box of the pixels above 1e-4 of its peak (empty when the
+  // ghost is off the image).
   double energy = 0.0;
   cv::Point2d centroid_px{0, 0};
   cv::Rect bbox_px;
@@ -121,7 +122,7 @@ struct RenderSummary {
   int ghosts_enumerated = 0;  // all two-reflection sequences of the lens
   int ghosts_rendered = 0;    // after culling
   int wavelengths = 0;
-  long long rays_traced = 0;  // rays × surfaces sequences traced (over ghosts and wavelengths)
+  long long rays_traced = 0;  // rays traced (bounding passes + grids, over ghosts and wavelengths)
   int threads = 0;
   double trace_ms = 0.0, raster_ms = 0.0, source_ms = 0.0, total_ms = 0.0;
   std::string BriefReport() const;

@@ -1,0 +1,253 @@
+#include "render/ghost_render.h"
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include "common/error.h"
+#include "render/paraxial.h"
+
+namespace flarekit::render {
+
+std::vector<SurfaceCoating> surfaceCoatings(const Lens& lens, const FlareRenderOptions& options) {
+  const double n_c = options.coating_ior > 0 ? options.coating_ior
+                                             : lens.coating_ior.value_or(1.38);
+  std::vector<SurfaceCoating> out(lens.surfaces.size());
+  for (size_t i = 0; i < lens.surfaces.size(); ++i) {
+    const Surface& s = lens.surfaces[i];
+    if (s.is_stop || options.uncoated) continue;
+    const double design = options.coating_override_nm > 0
+                              ? options.coating_override_nm
+                              : s.coating_nm.value_or(options.default_coating_nm);
+    out[i].coated = true;
+    out[i].coating_ior = n_c;
+    out[i].thickness_nm = quarterWaveThickness_nm(design, n_c);
+  }
+  return out;
+}
+
+RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
+                          const FlareRenderOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw InputError("render options: " + error);
+  RenderSetup s;
+  s.lens = options.focus_at_infinity ? focusAtInfinity(lens) : lens;
+  if (options.f_number > 0) s.lens = stopDown(s.lens, options.f_number);
+  s.coatings = surfaceCoatings(s.lens, options);
+  s.samples = spectralSamples(options.spectral_samples);
+  for (const auto& sample : s.samples)
+    s.tables.emplace_back(s.lens, s.coatings, sample.wavelength_nm);
+  s.mapping.width_px = options.width_px;
+  s.mapping.height_px = options.height_px;
+  s.mapping.pixel_pitch_mm = std::min(options.sensor_width_mm / options.width_px,
+                                      options.sensor_height_mm / options.height_px);
+  s.direction = lightDirection(light.angle_deg * M_PI / 180.0, light.roll_deg * M_PI / 180.0);
+  s.light_irradiance = options.light_irradiance;
+  s.aperture = Aperture(options.aperture);
+  // Every ray that passes the first surface's rim crosses z = 0 within h0 + |tan θ|·|sag(h0)|.
+  const Surface& first = s.lens.surfaces.front();
+  const double h0 = first.semi_aperture_mm;
+  const double sag = first.isFlat() ? 0.0
+                                    : std::abs(first.radius_mm) -
+                                          std::sqrt(first.radius_mm * first.radius_mm - h0 * h0);
+  const double tan_t = std::hypot(s.direction[0], s.direction[1]) / std::max(1e-9, s.direction[2]);
+  s.search_half_mm = 1.02 * (h0 + tan_t * sag);
+  return s;
+}
+
+std::optional<RayGrid> boundGhost(const RenderSetup& setup, const CompiledPath& path) {
+  constexpr int kCoarse = 33;
+  RayGrid coarse;
+  coarse.half_size_mm = setup.search_half_mm;
+  coarse.n = kCoarse;
+  TracedRays rays;
+  traceGrid(path, setup.direction, coarse, &rays);
+  int i0 = kCoarse, i1 = -1, j0 = kCoarse, j1 = -1;
+  for (int j = 0; j < kCoarse; ++j)
+    for (int i = 0; i < kCoarse; ++i) {
+      const size_t k = static_cast<size_t>(j * kCoarse + i);
+      if (!rays.alive[k] || rays.r_rel[k] > 1.0f ||
+          rays.u[k] * rays.u[k] + rays.v[k] * rays.v[k] > 1.0f)
+        continue;
+      i0 = std::min(i0, i);
+      i1 = std::max(i1, i);
+      j0 = std::min(j0, j);
+      j1 = std::max(j1, j);
+    }
+  if (i1 < 0) return std::nullopt;
+  const double h = coarse.spacing_mm();
+  const double x0 = -coarse.half_size_mm + (i0 - 1) * h, x1 = -coarse.half_size_mm + (i1 + 1) * h;
+  const double y0 = -coarse.half_size_mm + (j0 - 1) * h, y1 = -coarse.half_size_mm + (j1 + 1) * h;
+  RayGrid box;
+  box.center_x_mm = 0.5 * (x0 + x1);
+  box.center_y_mm = 0.5 * (y0 + y1);
+  box.half_size_mm = 0.5 * std::max(x1 - x0, y1 - y0);
+  return box;
+}
+
+long long traceGhostTriangles(const RenderSetup& setup, const Ghost& ghost, int sample, int n,
+                              int batch, std::vector<RasterTriangle>* out) {
+  const SpectralSample& s = setup.samples[static_cast<size_t>(sample)];
+  const CompiledPath path = compilePath(setup.lens, ghostPath(setup.lens, ghost.surface_a, ghost.surface_b),
+                                        s.wavelength_nm, setup.tables[static_cast<size_t>(sample)]);
+  const auto box = boundGhost(setup, path);
+  if (!box) return 33LL * 33;
+  RayGrid grid = *box;
+  grid.n = n;
+  TracedRays rays;
+  traceGrid(path, setup.direction, grid, &rays);
+  const double cell = grid.spacing_mm();
+  const double cell_flux = cell * cell * std::abs(setup.direction[2]) * setup.light_irradiance;
+  buildTriangles(rays, setup.mapping, cell_flux, s.rgb_weight, batch, out);
+  return 33LL * 33 + static_cast<long long>(n) * n;
+}
+
+void splatGhost(const RenderSetup& setup, const Ghost& ghost, int sample, int n, cv::Mat* image) {
+  const SpectralSample& s = setup.samples[static_cast<size_t>(sample)];
+  const CompiledPath path = compilePath(setup.lens, ghostPath(setup.lens, ghost.surface_a, ghost.surface_b),
+                                        s.wavelength_nm, setup.tables[static_cast<size_t>(sample)]);
+  auto box = boundGhost(setup, path);
+  if (!box) return;
+  RayGrid grid = *box;
+  grid.half_size_mm *= 1.1;
+  grid.n = n;
+  const double h = grid.spacing_mm();
+  const double pitch2 = setup.mapping.pixel_pitch_mm * setup.mapping.pixel_pitch_mm;
+  const double cell_flux = h * h * std::abs(setup.direction[2]) * setup.light_irradiance;
+  tbb::enumerable_thread_specific<cv::Mat> local([&] {
+    return cv::Mat(image->size(), CV_32FC3, cv::Scalar::all(0));
+  });
+  tbb::parallel_for(0, n, [&](int j) {
+    cv::Mat& img = local.local();
+    std::vector<double> xs(static_cast<size_t>(n)), ys(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      xs[static_cast<size_t>(i)] = grid.center_x_mm - grid.half_size_mm + i * h;
+      ys[static_cast<size_t>(i)] = grid.center_y_mm - grid.half_size_mm + j * h;
+    }
+    TracedRays rays;
+    rays.resize(n);
+    traceRays(path, setup.direction, xs.data(), ys.data(), n, &rays);
+    for (int i = 0; i < n; ++i) {
+      const size_t k = static_cast<size_t>(i);
+      if (!rays.alive[k] || rays.r_rel[k] > 1.0f) continue;
+      const float a = setup.aperture.transmission(rays.u[k], rays.v[k]);
+      if (a <= 0) continue;
+      const double px = setup.mapping.toPixelX(rays.x_mm[k]);
+      const double py = setup.mapping.toPixelY(rays.y_mm[k]);
+      if (!(px >= 0 && py >= 0 && px < img.cols && py < img.rows)) continue;
+      const float value = static_cast<float>(cell_flux * rays.transmission[k] * a / pitch2);
+      img.at<cv::Vec3f>(static_cast<int>(py), static_cast<int>(px)) += s.rgb_weight * value;
+    }
+  });
+  for (const cv::Mat& m : local) *image += m;
+}
+
+DirectLight traceDirectLight(const RenderSetup& setup, int sample, int n) {
+  const SpectralSample& s = setup.samples[static_cast<size_t>(sample)];
+  const CompiledPath path = compilePath(setup.lens, directPath(setup.lens), s.wavelength_nm,
+                                        setup.tables[static_cast<size_t>(sample)]);
+  DirectLight out;
+  const auto box = boundGhost(setup, path);
+  if (!box) return out;
+  RayGrid grid = *box;
+  grid.n = n;
+  TracedRays rays;
+  traceGrid(path, setup.direction, grid, &rays);
+  const double h = grid.spacing_mm();
+  const double cell_flux = h * h * std::abs(setup.direction[2]) * setup.light_irradiance;
+  double sx = 0, sy = 0;
+  for (size_t k = 0; k < rays.alive.size(); ++k) {
+    if (!rays.alive[k] || rays.r_rel[k] > 1.0f) continue;
+    const double f = cell_flux * rays.transmission[k] * setup.aperture.transmission(rays.u[k], rays.v[k]);
+    out.flux += f;
+    sx += f * rays.x_mm[k];
+    sy += f * rays.y_mm[k];
+  }
+  if (out.flux > 0) {
+    out.center_px = {setup.mapping.toPixelX(sx / out.flux), setup.mapping.toPixelY(sy / out.flux)};
+    out.valid = true;
+  }
+  return out;
+}
+
+double pathTransmissionAtNormal(const RenderSetup& setup, const std::vector<PathEvent>& path,
+                                double wavelength_nm) {
+  double t = 1.0;
+  for (const PathEvent& e : path) {
+    if (e.kind == EventKind::kStop) continue;
+    const double n1 = setup.lens.refractiveIndex(e.medium_before, wavelength_nm);
+    const Surface& s = setup.lens.surfaces[static_cast<size_t>(e.surface)];
+    (void)s;
+    const int other = e.forward ? e.surface : e.surface - 1;
+    const double n2 = setup.lens.refractiveIndex(e.kind == EventKind::kReflect ? other : e.medium_after,
+                                                 wavelength_nm);
+    const double r = setup.coatings[static_cast<size_t>(e.surface)].reflectance(n1, n2, wavelength_nm, 1.0);
+    t *= e.kind == EventKind::kReflect ? r : 1.0 - r;
+  }
+  return t;
+}
+
+double ghostIntensityEstimate(const RenderSetup& setup, const Ghost& ghost) {
+  const auto path = ghostPath(setup.lens, ghost.surface_a, ghost.surface_b);
+  const ParaxialGhost pg = paraxialGhost(setup.lens, path, 550.0);
+  const double t = pathTransmissionAtNormal(setup, path, 550.0);
+  if (!pg.valid) return 0.0;
+  // A ghost no smaller than one pixel: |A| · pupil radius ≥ pitch.
+  const double cap = std::pow(pg.pupil_radius_mm / setup.mapping.pixel_pitch_mm, 2.0);
+  return t * std::min(pg.area_gain, cap);
+}
+
+void addMatrixSprite(const RenderSetup& setup, const Ghost& ghost, cv::Mat* image) {
+  const auto path = ghostPath(setup.lens, ghost.surface_a, ghost.surface_b);
+  const double wx = setup.direction[0] / setup.direction[2], wy = setup.direction[1] / setup.direction[2];
+  const double pitch = setup.mapping.pixel_pitch_mm;
+  const double stop = setup.lens.stopSemiAperture_mm();
+  struct Sprite {
+    double cx, cy, m;  // centre (px) and signed pixels per aperture unit
+    float value;
+    cv::Vec3f weight;
+  };
+  std::vector<Sprite> sprites;
+  int x0 = image->cols, y0 = image->rows, x1 = -1, y1 = -1;
+  for (const SpectralSample& s : setup.samples) {
+    const ParaxialGhost pg = paraxialGhost(setup.lens, path, s.wavelength_nm);
+    if (!pg.valid || pg.magnification == 0.0) continue;
+    Sprite sp;
+    sp.cx = setup.mapping.toPixelX(pg.center_per_slope_mm * wx);
+    sp.cy = setup.mapping.toPixelY(pg.center_per_slope_mm * wy);
+    sp.m = pg.magnification * stop / pitch;
+    if (std::abs(sp.m) < 0.5) sp.m = sp.m < 0 ? -0.5 : 0.5;  // at least a pixel across
+    // Lee & Eisemann §3.2: irradiance = T · cos θ · (pupil area / ghost area) = T cos θ / A².
+    // 1/A² with A = A1 · magnification, A1 = stop / pupil radius, magnification = m · pitch / stop.
+    const double area_gain = std::pow(pg.pupil_radius_mm / (sp.m * pitch), 2.0);
+    sp.value = static_cast<float>(pathTransmissionAtNormal(setup, path, s.wavelength_nm) *
+                                  std::abs(setup.direction[2]) * setup.light_irradiance * area_gain);
+    sp.weight = s.rgb_weight;
+    const double r = std::abs(sp.m) + 1.0;
+    x0 = std::min(x0, std::max(0, static_cast<int>(std::floor(sp.cx - r))));
+    x1 = std::max(x1, std::min(image->cols - 1, static_cast<int>(std::ceil(sp.cx + r))));
+    y0 = std::min(y0, std::max(0, static_cast<int>(std::floor(sp.cy - r))));
+    y1 = std::max(y1, std::min(image->rows - 1, static_cast<int>(std::ceil(sp.cy + r))));
+    sprites.push_back(sp);
+  }
+  if (sprites.empty() || x0 > x1 || y0 > y1) return;
+  for (int y = y0; y <= y1; ++y) {
+    auto* row = image->ptr<cv::Vec3f>(y);
+    for (int x = x0; x <= x1; ++x) {
+      cv::Vec3f sum(0, 0, 0);
+      for (const Sprite& sp : sprites) {
+        const float u = static_cast<float>((x + 0.5 - sp.cx) / sp.m);
+        const float v = static_cast<float>((y + 0.5 - sp.cy) / sp.m);
+        if (u * u + v * v > 1.2f) continue;
+        const float a = setup.aperture.coverage(u, v, static_cast<float>(1.0 / std::abs(sp.m)));
+        if (a > 0) sum += sp.weight * (sp.value * a);
+      }
+      row[x] += sum;
+    }
+  }
+}
+
+}  // namespace flarekit::render

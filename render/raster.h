@@ -1,0 +1,73 @@
+#pragma once
+// Ghost rasterization (Hullin 2011 §3.2; Bodonyi & Kunkli 2023 §4). Each cell of a traced ray
+// grid is a quad on the sensor, split into two triangles along a fixed diagonal. A pixel centre
+// inside a triangle (top-left fill rule, so shared edges count once) receives
+//   irradiance = T · (pupil area of the triangle / its sensor area) · A(u, v) · C(r_rel)
+// with T, (u, v) and r_rel interpolated linearly over the triangle, A the aperture (antialiased
+// over one pixel footprint) and C = clamp(0.5 + (1 − r_rel)/footprint) the rim vignetting.
+// Both rasterizers below call the same per-pixel function, so they give the same image up to
+// the order of floating-point additions.
+
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "render/aperture.h"
+#include "render/tracer.h"
+
+namespace flarekit::render {
+
+struct RasterTriangle {
+  float ox = 0, oy = 0;            // origin (first vertex), pixel coordinates
+  float ea[3], eb[3], ec[3];       // edge functions e = a·(x−ox) + b·(y−oy) + c, ≥ 0 inside
+  bool top_left[3];                // edges that own their pixel centres on ties
+  float u0, ux, uy, v0, vx, vy;    // aperture coordinates: u = u0 + ux (x−ox) + uy (y−oy)
+  float r0, rx, ry;                // r_rel
+  float t0, tx, ty;                // transmission
+  float aperture_footprint;        // aperture units spanned by one pixel
+  float rim_footprint;             // r_rel units spanned by one pixel
+  cv::Vec3f weight;                // colour weight × E_in × pupil area / sensor area
+  int x0, y0, x1, y1;              // pixel bounding box, inclusive, clipped to the image
+  int batch;                       // which (ghost, wavelength) it came from
+};
+
+// How a traced grid maps to pixels.
+struct SensorMapping {
+  int width_px = 0, height_px = 0;
+  double pixel_pitch_mm = 0.0;
+  double toPixelX(double x_mm) const { return width_px * 0.5 + x_mm / pixel_pitch_mm; }
+  double toPixelY(double y_mm) const { return height_px * 0.5 + y_mm / pixel_pitch_mm; }
+};
+
+// Builds the triangles of a traced grid. `cell_flux` = E_in × the beam cross-section of one
+// grid cell (spacing² · |d_z|); `weight` the colour weight of this wavelength. Quads with a dead
+// corner are skipped; so are quads whose four corners all lie outside the ghost (r_rel > 1 or
+// |(u, v)| > 1), as in Bodonyi & Kunkli §4.1. Appends to `out`.
+void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double cell_flux,
+                    const cv::Vec3f& weight, int batch, std::vector<RasterTriangle>* out);
+
+// Value (before the colour weight) of a triangle at pixel centre (x, y), 0 outside it.
+float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, float y);
+
+// Reference: rasterizes one batch after another, each into its own buffer over its bounding
+// box, added to `image` (CV_32FC3, must have the mapping's size). Parallel over batches.
+void rasterizePerGhost(const std::vector<std::vector<RasterTriangle>>& batches,
+                       const Aperture& aperture, cv::Mat* image);
+
+// Only the batches for which keep[batch] is true (nullptr = all), into `image`, serially.
+void rasterizeBatches(const std::vector<std::vector<RasterTriangle>>& batches,
+                      const std::vector<bool>* keep, const Aperture& aperture, cv::Mat* image);
+
+struct TileOptions {
+  int coarse_tile_px = 128;  // first-level tiles (Bodonyi & Kunkli §4.3, 128×128)
+  int fine_tile_px = 16;     // second-level tiles; a multiple-of divisor of coarse_tile_px
+  bool IsValid(std::string* error) const;
+};
+
+// Tiled accumulation (Bodonyi & Kunkli §4.3–4.4): all batches' triangles are binned into coarse
+// then fine screen tiles; every pixel sums the triangles of its tile once, in a tile-local
+// buffer, and is written once. Adds to `image`.
+void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
+                    const Aperture& aperture, const TileOptions& options, cv::Mat* image);
+
+}  // namespace flarekit::render

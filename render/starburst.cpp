@@ -1,0 +1,94 @@
+#include "render/starburst.h"
+
+#include <cmath>
+
+#include <opencv2/imgproc.hpp>
+
+namespace flarekit::render {
+
+cv::Mat starburstPattern(const Aperture& aperture, int fft_size) {
+  const int d = std::max(8, fft_size / 4);
+  cv::Mat field(fft_size, fft_size, CV_32FC1, cv::Scalar(0));
+  aperture.raster(d).copyTo(field(cv::Rect((fft_size - d) / 2, (fft_size - d) / 2, d, d)));
+  cv::Mat spectrum;
+  cv::dft(field, spectrum, cv::DFT_COMPLEX_OUTPUT);
+  cv::Mat planes[2];
+  cv::split(spectrum, planes);
+  cv::Mat power;
+  cv::magnitude(planes[0], planes[1], power);
+  power = power.mul(power);
+  // Move the zero frequency to the centre (fft_size / 2).
+  const int h = fft_size / 2;
+  cv::Mat shifted(power.size(), power.type());
+  power(cv::Rect(0, 0, h, h)).copyTo(shifted(cv::Rect(h, h, h, h)));
+  power(cv::Rect(h, 0, fft_size - h, h)).copyTo(shifted(cv::Rect(0, h, fft_size - h, h)));
+  power(cv::Rect(0, h, h, fft_size - h)).copyTo(shifted(cv::Rect(h, 0, h, fft_size - h)));
+  power(cv::Rect(h, h, fft_size - h, fft_size - h)).copyTo(shifted(cv::Rect(0, 0, fft_size - h, fft_size - h)));
+  const double sum = cv::sum(shifted)[0];
+  if (sum > 0) shifted /= sum;
+  return shifted;
+}
+
+void addStarburst(const cv::Mat& pattern, cv::Point2d center_px, double radius_px,
+                  double flux_px, const cv::Vec3f& weight, cv::Mat* image) {
+  if (!(flux_px > 0) || !(radius_px > 0)) return;
+  const int n = pattern.cols;
+  const double scale = radius_px / (n / 2.0);  // pixels per bin
+  const int size = std::max(1, static_cast<int>(std::lround(n * scale)));
+  if (size > 8192) return;
+  cv::Mat sprite;
+  if (size == n)
+    sprite = pattern.clone();
+  else
+    cv::resize(pattern, sprite, cv::Size(size, size), 0, 0,
+               size < n ? cv::INTER_AREA : cv::INTER_LINEAR);
+  const double s = cv::sum(sprite)[0];
+  if (!(s > 0)) return;
+  sprite *= flux_px / s;
+  // The sprite's centre (size/2 in its pixel-edge coordinates) goes to center_px, by an integer
+  // offset plus a bilinear sub-pixel shift.
+  const double ox = center_px.x - size / 2.0, oy = center_px.y - size / 2.0;
+  const int ix = static_cast<int>(std::floor(ox)), iy = static_cast<int>(std::floor(oy));
+  const float fx = static_cast<float>(ox - ix), fy = static_cast<float>(oy - iy);
+  const float w[2][2] = {{(1 - fx) * (1 - fy), fx * (1 - fy)}, {(1 - fx) * fy, fx * fy}};
+  for (int y = 0; y < size; ++y)
+    for (int x = 0; x < size; ++x) {
+      const float v = sprite.at<float>(y, x);
+      if (v == 0.0f) continue;
+      for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b) {
+          const int px = ix + x + b, py = iy + y + a;
+          if (px < 0 || py < 0 || px >= image->cols || py >= image->rows) continue;
+          image->at<cv::Vec3f>(py, px) += weight * (v * w[a][b]);
+        }
+    }
+}
+
+void addHalo(cv::Point2d center_px, double radius_px, double flux_px, const cv::Vec3f& weight,
+             cv::Mat* image) {
+  if (!(flux_px > 0) || !(radius_px > 0)) return;
+  const double cut = 4.0 * radius_px;
+  const int x0 = std::max(0, static_cast<int>(std::floor(center_px.x - cut)));
+  const int x1 = std::min(image->cols - 1, static_cast<int>(std::ceil(center_px.x + cut)));
+  const int y0 = std::max(0, static_cast<int>(std::floor(center_px.y - cut)));
+  const int y1 = std::min(image->rows - 1, static_cast<int>(std::ceil(center_px.y + cut)));
+  if (x0 > x1 || y0 > y1) return;
+  // Normalise over the whole disc (not only the visible part) so the halo does not brighten
+  // when the light leaves the image.
+  double total = 0.0;
+  const int r = static_cast<int>(std::ceil(cut));
+  for (int y = -r; y <= r; ++y)
+    for (int x = -r; x <= r; ++x) {
+      const double q = std::hypot(x, y);
+      if (q <= cut) total += std::pow(1.0 + (q / radius_px) * (q / radius_px), -1.5);
+    }
+  for (int y = y0; y <= y1; ++y)
+    for (int x = x0; x <= x1; ++x) {
+      const double q = std::hypot(x + 0.5 - center_px.x, y + 0.5 - center_px.y);
+      if (q > cut) continue;
+      const double v = flux_px * std::pow(1.0 + (q / radius_px) * (q / radius_px), -1.5) / total;
+      image->at<cv::Vec3f>(y, x) += weight * static_cast<float>(v);
+    }
+}
+
+}  // namespace flarekit::render

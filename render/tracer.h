@@ -1,0 +1,93 @@
+#pragma once
+// Bundle tracing (Hullin 2011 §3.2, DESIGN "Bundle tracing"): a regular grid of parallel rays
+// from the plane of the first vertex (z = 0) is walked through a fixed sequence of surface events
+// (render/ghosts.h). Spheres are intersected on their vertex-side hemisphere, extended past their
+// rims, with negative ray parameters allowed; rays are dropped only when they miss a sphere,
+// meet total internal reflection at a refraction, or turn back before the sensor. Each ray keeps
+// r_rel = max r / semi-aperture over the surfaces it meets, its aperture coordinates (u, v) at the
+// first stop crossing (stop semi-aperture = 1), its transmission and its sensor position.
+
+#include <cstdint>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "render/coating.h"
+#include "render/ghosts.h"
+#include "render/lens.h"
+
+namespace flarekit::render {
+
+// Reflectance of every surface at one wavelength as a function of cos(incidence), sampled for
+// fast lookup (the curves are smooth; 1/64 steps in cos θ keep errors below 1e-4 away from the
+// critical angle).
+class ReflectanceTables {
+ public:
+  static constexpr int kSamples = 129;
+  ReflectanceTables(const Lens& lens, const std::vector<SurfaceCoating>& coatings,
+                    double wavelength_nm);
+  // R(cos θ) of surface i for light arriving travelling forward (from the object side) or back.
+  const float* table(int surface, bool forward) const {
+    return &values_[(static_cast<size_t>(surface) * 2 + (forward ? 0 : 1)) * kSamples];
+  }
+  static float lookup(const float* table, double cos_incidence);
+
+ private:
+  std::vector<float> values_;
+};
+
+struct CompiledEvent {
+  double z = 0.0;          // vertex position
+  double radius = 0.0;     // 0 = flat
+  double inv_semi = 0.0;   // 1 / semi-aperture (r_rel)
+  EventKind kind = EventKind::kRefract;
+  double eta = 1.0;        // n_before / n_after (refraction)
+  const float* reflectance = nullptr;  // R(cos θ) table for this surface and direction
+};
+
+// One path at one wavelength, ready to trace.
+struct CompiledPath {
+  std::vector<CompiledEvent> events;
+  double z_sensor = 0.0;
+  double stop_semi_mm = 1.0;
+  double wavelength_nm = 0.0;
+};
+CompiledPath compilePath(const Lens& lens, const std::vector<PathEvent>& path,
+                         double wavelength_nm, const ReflectanceTables& tables);
+
+// Unit direction of a distant light (render/flare_renderer.h convention): θ > 0 images towards
+// −x, the roll φ turns it about the axis.
+cv::Vec3d lightDirection(double angle_rad, double roll_rad);
+
+// A square grid of n×n ray origins in the z = 0 plane, nodes at centre ± half_size.
+struct RayGrid {
+  double center_x_mm = 0.0, center_y_mm = 0.0, half_size_mm = 1.0;
+  int n = 2;
+  double spacing_mm() const { return 2.0 * half_size_mm / (n - 1); }
+};
+
+// Traced rays (struct of arrays, row-major over the grid: index = j·n + i, x along i).
+struct TracedRays {
+  int n = 0;
+  std::vector<float> x_mm, y_mm;  // sensor position
+  std::vector<float> u, v;        // aperture coordinates at the first stop crossing
+  std::vector<float> r_rel;       // max r / semi-aperture (stop crossings after the first count too)
+  std::vector<float> transmission;
+  std::vector<uint8_t> alive;     // 0 = missed a sphere, TIR, or never reached the sensor
+  void resize(int count);
+};
+
+// Traces `count` rays of direction `dir` from (x0[k], y0[k], 0).
+void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0, const double* y0,
+               int count, TracedRays* out, int offset = 0);
+// Traces a grid (out->n = grid.n).
+void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
+               TracedRays* out);
+
+// The point in the z = 0 plane from which a ray of direction `dir` passes the centre of the stop
+// on `path` (found by Newton iteration on the real trace, started from the paraxial guess).
+// Returns false when no such ray exists.
+bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,
+                       double guess_y, cv::Point2d* origin);
+
+}  // namespace flarekit::render
