@@ -65,6 +65,10 @@ struct PreparedShape {
   std::array<PowerCubic, 2> seg{};
   std::array<int, 2> samples{};  // samples per segment
   std::array<std::array<double, kMaxSamples>, 2> sample_t{}, sample_x{}, sample_y{};
+  // Unit tangent direction at each sample (B′, or B″ where B′ vanishes).
+  std::array<std::array<double, kMaxSamples>, 2> tangent_x{}, tangent_y{};
+  // Bounding box of the piece between samples k and k + 1 (box of its Bézier control points).
+  std::array<std::array<double, kMaxSamples>, 2> box_x0{}, box_x1{}, box_y0{}, box_y1{};
 
   PreparedShape() = default;
   PreparedShape(const GhostParameters& g, int samples_per_segment, double max_turn_deg = 10) {
@@ -105,6 +109,22 @@ struct PreparedShape {
         sample_t[s][k] = ts[k];
         sample_x[s][k] = seg[s].x(ts[k]);
         sample_y[s][k] = seg[s].y(ts[k]);
+        const cv::Point2d dir = tangentDirection(seg[s], ts[k]);
+        tangent_x[s][k] = dir.x;
+        tangent_y[s][k] = dir.y;
+      }
+      for (int k = 0; k + 1 < n; ++k) {
+        // The piece [a, b] as a Bézier: B(a), B(a) + (b − a)/3·B′(a), B(b) − (b − a)/3·B′(b), B(b);
+        // it lies in the convex hull of these, so in their box.
+        const double a = ts[k], b = ts[k + 1], third = (b - a) / 3;
+        const double xs[4] = {seg[s].x(a), seg[s].x(a) + third * seg[s].dx(a),
+                              seg[s].x(b) - third * seg[s].dx(b), seg[s].x(b)};
+        const double ys[4] = {seg[s].y(a), seg[s].y(a) + third * seg[s].dy(a),
+                              seg[s].y(b) - third * seg[s].dy(b), seg[s].y(b)};
+        box_x0[s][k] = std::min({xs[0], xs[1], xs[2], xs[3]});
+        box_x1[s][k] = std::max({xs[0], xs[1], xs[2], xs[3]});
+        box_y0[s][k] = std::min({ys[0], ys[1], ys[2], ys[3]});
+        box_y1[s][k] = std::max({ys[0], ys[1], ys[2], ys[3]});
       }
     }
   }
@@ -138,35 +158,42 @@ inline double refineNearest(const PowerCubic& c, double px, double py, double lo
 }
 
 // The nearest point on one upper segment to the relative point (px, py): sets t and squared
-// distance. Coarse samples, then safeguarded Newton from every local minimum of the sampled
-// distances (shared/FITTING_NOTES.md: sampling then Newton is the robust choice; starting from
-// every sampled minimum, not just the best, keeps the right basin on long thin shapes, where
-// inside points see several local minima).
+// distance. Coarse samples (shared/FITTING_NOTES.md: sampling then Newton is the robust choice),
+// then safeguarded Newton in every piece between two samples where the distance turns from
+// falling to rising (the sign of (B − p)·T changes, T the unit tangent) unless the piece's box is
+// already farther than the best point found. Every local minimum of the distance inside the
+// segment lies in such a piece, unless a piece holds several, which the turn-limited sampling
+// makes rare and harmless (their values differ by less than the piece's sagitta effects).
 inline void nearestOnSegmentNewton(const PreparedShape& s, int which, double px, double py,
                                    int newton_steps, double& t_out, double& d2_out) {
   const PowerCubic& c = s.seg[which];
   const auto& sx = s.sample_x[which];
   const auto& sy = s.sample_y[which];
-  const int n = s.samples[which];
+  const auto& tx = s.tangent_x[which];
+  const auto& ty = s.tangent_y[which];
   const auto& st = s.sample_t[which];
-  std::array<double, kMaxSamples> d2s;
-  for (int k = 0; k < n; ++k) {
-    const double dx = sx[k] - px, dy = sy[k] - py;
-    d2s[k] = dx * dx + dy * dy;
-  }
+  const int n = s.samples[which];
+  std::array<double, kMaxSamples> slope;  // (S_k − p)·T_k: < 0 while the distance falls
   t_out = 0;
   d2_out = 1e308;
   for (int k = 0; k < n; ++k) {
-    const bool left_ok = k == 0 || d2s[k] <= d2s[k - 1];
-    const bool right_ok = k == n - 1 || d2s[k] < d2s[k + 1];
-    if (!left_ok || !right_ok) continue;
-    if (d2s[k] < d2_out) {  // the sample itself is a candidate
-      d2_out = d2s[k];
+    const double dx = sx[k] - px, dy = sy[k] - py;
+    const double d2 = dx * dx + dy * dy;
+    slope[k] = dx * tx[k] + dy * ty[k];
+    if (d2 < d2_out) {
+      d2_out = d2;
       t_out = st[k];
     }
+  }
+  for (int k = 0; k + 1 < n; ++k) {
+    if (!(slope[k] < 0 && slope[k + 1] > 0)) continue;
+    // Skip the piece when its box is already farther than the best point.
+    const double bx = std::max({s.box_x0[which][k] - px, 0.0, px - s.box_x1[which][k]});
+    const double by = std::max({s.box_y0[which][k] - py, 0.0, py - s.box_y1[which][k]});
+    if (bx * bx + by * by >= d2_out) continue;
+    const double start = -slope[k] < slope[k + 1] ? st[k] : st[k + 1];
     double d2 = 0;
-    const double t = refineNearest(c, px, py, st[std::max(0, k - 1)], st[std::min(n - 1, k + 1)],
-                                   st[k], newton_steps, d2);
+    const double t = refineNearest(c, px, py, st[k], st[k + 1], start, newton_steps, d2);
     if (d2 < d2_out) {
       d2_out = d2;
       t_out = t;
