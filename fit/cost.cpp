@@ -1,0 +1,300 @@
+#include "fit/cost.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <opencv2/imgproc.hpp>
+
+namespace flarekit::fit {
+
+bool CostOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (!(edge_weight >= 0) || !std::isfinite(edge_weight)) return fail("edge_weight (λ) must be ≥ 0");
+  if (!(edge_sigma1_px > 0) || !(edge_sigma1_px <= 50)) return fail("edge_sigma1_px must be in (0, 50]");
+  if (!(edge_sigma2_px > 0) || !(edge_sigma2_px <= 50)) return fail("edge_sigma2_px must be in (0, 50]");
+  if (!(region_margin_px >= 0) || !(region_margin_px <= 1000)) return fail("region_margin_px must be in [0, 1000]");
+  if (!(loss_scale >= 0) || !std::isfinite(loss_scale)) return fail("loss_scale must be ≥ 0");
+  if (max_pixels < 1000) return fail("max_pixels must be ≥ 1000");
+  return true;
+}
+
+// ── Edge filter ───────────────────────────────────────────────────────────────────────────────
+
+EdgeFilter::EdgeFilter(const CostOptions& options)
+    : sigma1_(options.edge_sigma1_px),
+      sigma2_(options.edge_sigma2_px),
+      // The 8-neighbour Laplacian approximates 3∇²; σ1² + σ2² is the Lindeberg normalisation.
+      scale_((options.edge_sigma1_px * options.edge_sigma1_px +
+              options.edge_sigma2_px * options.edge_sigma2_px) / 3.0) {
+  // OpenCV's GaussianBlur with ksize 0 truncates float kernels at 4σ.
+  radius_ = static_cast<int>(std::ceil(4 * sigma1_)) + static_cast<int>(std::ceil(4 * sigma2_)) + 1;
+}
+
+cv::Mat EdgeFilter::apply(const cv::Mat& image) const {
+  // Walch 2018 §3.3.1, Fig. 7: Gaussian, Laplacian (horizontal, vertical and diagonal edges),
+  // Gaussian again. Each Gaussian is separable (OpenCV runs it as two 1-D passes).
+  static const cv::Mat laplacian8 = (cv::Mat_<float>(3, 3) << 1, 1, 1, 1, -8, 1, 1, 1, 1);
+  cv::Mat a, b;
+  cv::GaussianBlur(image, a, cv::Size(0, 0), sigma1_, sigma1_, cv::BORDER_REPLICATE);
+  cv::filter2D(a, b, CV_32F, laplacian8, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
+  cv::GaussianBlur(b, a, cv::Size(0, 0), sigma2_, sigma2_, cv::BORDER_REPLICATE);
+  a *= scale_;
+  return a;
+}
+
+// ── Frame data ────────────────────────────────────────────────────────────────────────────────
+
+double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
+  std::vector<float> values;
+  const int c = image.channels();
+  const int step = std::max(1, static_cast<int>(std::sqrt(image.total() / 40000.0)));
+  for (int y = 0; y < image.rows; y += step) {
+    const float* p = image.ptr<float>(y);
+    const uchar* v = valid.ptr<uchar>(y);
+    for (int x = 0; x < image.cols; x += step) {
+      if (!v[x]) continue;
+      double sum = 0;
+      for (int k = 0; k < c; ++k) sum += p[x * c + k];
+      values.push_back(static_cast<float>(sum / c));
+    }
+  }
+  if (values.size() < 16) return 0;
+  // The fainter half is background (and faint flare): its spread is the noise.
+  std::sort(values.begin(), values.end());
+  values.resize(values.size() / 2);
+  const float median = values[values.size() / 2];
+  for (auto& v : values) v = std::abs(v - median);
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return 1.4826 * values[values.size() / 2];
+}
+
+FrameData FrameData::make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge) {
+  FrameData d;
+  d.image = image;
+  d.valid = valid;
+  d.channels = image.channels();
+  d.edge = edge.apply(image);
+  cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT,
+                                             cv::Size(2 * edge.radius() + 1, 2 * edge.radius() + 1));
+  cv::erode(valid, d.edge_valid, kernel, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(255));
+  d.noise_sigma = estimateNoiseSigma(image, valid);
+  return d;
+}
+
+// ── Bounds ────────────────────────────────────────────────────────────────────────────────────
+
+model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double scale) {
+  using namespace model::param;
+  const model::ParameterLayout layout{channels};
+  model::ParameterBounds b = model::parameterBounds(index, channels);
+  const double diag = std::hypot(size.width, size.height);
+  auto clamp = [&](double lo, double hi) {
+    b.lower = std::max(b.lower, lo);
+    b.upper = std::min(b.upper, hi);
+  };
+  if (index == kMx) clamp(-size.width, 2.0 * size.width);
+  else if (index == kMy) clamp(-size.height, 2.0 * size.height);
+  else if (index == kL || index == kR || index == kH) clamp(0.5, diag);
+  else if (index >= layout.ib(0) && index < layout.fi()) clamp(0, 20 * scale);
+  else if (index == layout.fi() || index == layout.fo()) clamp(0.3, diag);
+  return b;
+}
+
+// ── Group cost ────────────────────────────────────────────────────────────────────────────────
+
+GroupCost::GroupCost(const FrameData& frame, const EdgeFilter& edge, const cv::Mat& others,
+                     std::span<const model::GhostParameters> seeds, const CostOptions& options)
+    : frame_(frame), edge_(edge), options_(options) {
+  if (seeds.empty()) throw std::invalid_argument("GroupCost needs at least one ghost");
+  ghost_count_ = static_cast<int>(seeds.size());
+  channels_ = frame.channels;
+  parameters_per_ghost_ = model::parameterCount(channels_);
+  const cv::Rect image_rect(0, 0, frame.image.cols, frame.image.rows);
+  cv::Rect box;
+  for (const auto& g : seeds) {
+    if (g.channels != channels_) throw std::invalid_argument("ghost channels differ from the frame's");
+    box |= model::ghostPixelBounds(g);
+  }
+  const int m = static_cast<int>(std::ceil(options.region_margin_px));
+  region_ = cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & image_rect;
+  const int r = edge.radius();
+  grown_ = cv::Rect(region_.x - r, region_.y - r, region_.width + 2 * r, region_.height + 2 * r);
+  if (region_.empty()) return;
+
+  target_ = frame.image(region_).clone();
+  target_edge_ = frame.edge(region_).clone();
+  if (!others.empty()) {
+    target_ -= others(region_);
+    const cv::Rect window = grown_ & image_rect;
+    cv::Mat others_edge = edge.apply(others(window));
+    target_edge_ -= others_edge(cv::Rect(region_.x - window.x, region_.y - window.y,
+                                         region_.width, region_.height));
+  }
+  data_valid_ = frame.valid(region_);
+  edge_valid_ = frame.edge_valid(region_);
+
+  // The region scale s: the 99th percentile of the target over valid pixels (see cost.h).
+  std::vector<float> values;
+  values.reserve(region_.area());
+  for (int y = 0; y < region_.height; ++y) {
+    const float* p = target_.ptr<float>(y);
+    const uchar* v = data_valid_.ptr<uchar>(y);
+    for (int x = 0; x < region_.width; ++x) {
+      if (!v[x]) continue;
+      float s = 0;
+      for (int c = 0; c < channels_; ++c) s = std::max(s, p[x * channels_ + c]);
+      values.push_back(s);
+    }
+  }
+  double scale = 0;
+  if (!values.empty()) {
+    const size_t k = static_cast<size_t>(0.99 * (values.size() - 1));
+    std::nth_element(values.begin(), values.begin() + k, values.end());
+    scale = values[k];
+  }
+  scale_ = std::max({scale, 3 * frame.noise_sigma, 1e-12});
+
+  const int stride = std::max(
+      1, static_cast<int>(std::ceil(std::sqrt(double(region_.area()) / options.max_pixels))));
+  for (int y = stride / 2; y < region_.height; y += stride) {
+    const uchar* v = data_valid_.ptr<uchar>(y);
+    for (int x = stride / 2; x < region_.width; x += stride)
+      if (v[x]) samples_.emplace_back(x, y);
+  }
+}
+
+double GroupCost::evaluate(const std::vector<const double*>& parameters, bool jacobians) {
+  std::vector<model::GhostParameters> ghosts;
+  ghosts.reserve(parameters.size());
+  for (const double* p : parameters)
+    ghosts.push_back(model::fromParameterVector(std::span<const double>(p, parameters_per_ghost_), channels_));
+  return evaluate(ghosts, jacobians);
+}
+
+double GroupCost::evaluate(std::span<const model::GhostParameters> input, bool jacobians) {
+  ++evaluations_;
+  if (static_cast<int>(input.size()) != ghost_count_)
+    throw std::invalid_argument("GroupCost::evaluate: wrong number of ghosts");
+  if (region_.empty()) {
+    has_jacobians_ = jacobians;
+    return 0;
+  }
+  // Ceres keeps parameters within bounds; a caller (the GD baseline) may step onto the edge.
+  std::vector<model::GhostParameters> ghosts;
+  for (const auto& g : input) ghosts.push_back(model::isValid(g) ? g : model::clampToBounds(g));
+
+  const float inv_scale = static_cast<float>(1.0 / scale_);
+  const float edge_factor = static_cast<float>(std::sqrt(options_.edge_weight) / scale_);
+  const cv::Rect inner(region_.x - grown_.x, region_.y - grown_.y, region_.width, region_.height);
+
+  model::RenderOptions render;
+  render.parallel = true;
+  model::RenderedGhosts rendered;
+  if (jacobians)
+    rendered = model::renderGhostsWithDerivatives(ghosts, grown_, channels_, render);
+  else
+    rendered.image = model::renderGhosts(ghosts, grown_, channels_, render);
+  model_ = rendered.image(inner).clone();
+  cv::Mat model_edge = edge_.apply(rendered.image)(inner);
+  cv::subtract(model_, target_, residual_data_);
+  residual_data_ *= inv_scale;
+  cv::subtract(model_edge, target_edge_, residual_edge_);
+  residual_edge_ *= edge_factor;
+
+  has_jacobians_ = jacobians;
+  if (jacobians) {
+    jacobian_data_.assign(ghost_count_, std::vector<cv::Mat>(parameters_per_ghost_));
+    jacobian_edge_.assign(ghost_count_, std::vector<cv::Mat>(parameters_per_ghost_));
+    jacobian_rect_.assign(ghost_count_, std::vector<cv::Rect>(2));
+    const int r = edge_.radius();
+    for (int g = 0; g < ghost_count_; ++g) {
+      const auto& d = rendered.derivatives[g];
+      if (d.rect.empty()) continue;
+      // Data part: the derivative image where it meets the region.
+      const cv::Rect data_rect = d.rect & region_;
+      // Edge part: E spreads the derivative by the filter radius.
+      const cv::Rect spread(d.rect.x - r, d.rect.y - r, d.rect.width + 2 * r, d.rect.height + 2 * r);
+      const cv::Rect edge_rect = spread & region_;
+      jacobian_rect_[g][0] = data_rect - region_.tl();
+      jacobian_rect_[g][1] = edge_rect - region_.tl();
+      for (int k = 0; k < parameters_per_ghost_; ++k) {
+        const cv::Mat& image = d.images[k];
+        if (!data_rect.empty()) {
+          cv::Mat crop = image(data_rect - d.rect.tl());
+          crop.convertTo(jacobian_data_[g][k], CV_32F, inv_scale);
+        }
+        if (!edge_rect.empty()) {
+          cv::Mat padded = cv::Mat::zeros(spread.size(), image.type());
+          image.copyTo(padded(cv::Rect(r, r, d.rect.width, d.rect.height)));
+          cv::Mat e = edge_.apply(padded);
+          e(edge_rect - spread.tl()).convertTo(jacobian_edge_[g][k], CV_32F, edge_factor);
+        }
+      }
+    }
+  }
+  return totalCost();
+}
+
+void GroupCost::sampleResiduals(int sample, double* residuals) const {
+  const cv::Point p = samples_[sample];
+  const float* d = residual_data_.ptr<float>(p.y) + p.x * channels_;
+  const float* e = residual_edge_.ptr<float>(p.y) + p.x * channels_;
+  const bool edge_ok = edge_valid_.at<uchar>(p) != 0;
+  for (int c = 0; c < channels_; ++c) {
+    residuals[c] = d[c];
+    residuals[channels_ + c] = edge_ok ? e[c] : 0.0;
+  }
+}
+
+void GroupCost::sampleJacobian(int sample, int ghost, double* jacobian) const {
+  const cv::Point p = samples_[sample];
+  const int n = parameters_per_ghost_;
+  std::fill(jacobian, jacobian + 2 * channels_ * n, 0.0);
+  if (!has_jacobians_ || jacobian_rect_.empty()) return;
+  const cv::Rect& data_rect = jacobian_rect_[ghost][0];
+  const cv::Rect& edge_rect = jacobian_rect_[ghost][1];
+  const bool edge_ok = edge_valid_.at<uchar>(p) != 0;
+  if (data_rect.contains(p)) {
+    const cv::Point q = p - data_rect.tl();
+    for (int k = 0; k < n; ++k) {
+      const cv::Mat& m = jacobian_data_[ghost][k];
+      if (m.empty()) continue;
+      const float* v = m.ptr<float>(q.y) + q.x * channels_;
+      for (int c = 0; c < channels_; ++c) jacobian[c * n + k] = v[c];
+    }
+  }
+  if (edge_ok && edge_rect.contains(p)) {
+    const cv::Point q = p - edge_rect.tl();
+    for (int k = 0; k < n; ++k) {
+      const cv::Mat& m = jacobian_edge_[ghost][k];
+      if (m.empty()) continue;
+      const float* v = m.ptr<float>(q.y) + q.x * channels_;
+      for (int c = 0; c < channels_; ++c) jacobian[(channels_ + c) * n + k] = v[c];
+    }
+  }
+}
+
+double GroupCost::loss(double u) const {
+  if (options_.loss_scale <= 0) return u;
+  const double b = options_.loss_scale * options_.loss_scale;
+  return b * std::log1p(u / b);
+}
+
+double GroupCost::totalCost() const {
+  if (residual_data_.empty()) return 0;
+  double cost = 0;
+  std::vector<double> r(2 * channels_);
+  for (size_t i = 0; i < samples_.size(); ++i) {
+    sampleResiduals(static_cast<int>(i), r.data());
+    double u = 0;
+    for (double v : r) u += v * v;
+    cost += loss(u);
+  }
+  return 0.5 * cost;
+}
+
+}  // namespace flarekit::fit

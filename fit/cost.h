@@ -1,0 +1,161 @@
+#pragma once
+// The cost of a set of ghost parameters against one frame (Walch et al. 2018 §3.3.1):
+//
+//   cost = ½ Σ_p ρ( Σ_c r_data(p,c)² + r_edge(p,c)² )
+//   r_data(p,c) = (Y_c(p) − X_c(p)) / s
+//   r_edge(p,c) = √λ · ((E∗Y)_c(p) − (E∗X)_c(p)) / s
+//
+// with X the frame minus the ghosts modelled elsewhere, Y the model image of the ghosts being
+// fitted, and E = G_σ2 ∗ Lap ∗ G_σ1 the paper's edge filter (Fig. 7: Gaussian pre-smoothing, a
+// discrete Laplacian that responds to horizontal, vertical and diagonal edges, Gaussian
+// post-smoothing so that nearby edges overlap), built from separable Gaussians. We multiply E by
+// σ1² + σ2² (Lindeberg's scale normalisation of a Laplacian of Gaussian) so that λ = 1 weighs edges
+// about as much as values whatever the σ.
+//
+// Normalisation (ours, the paper fits 8-bit-like images): HDR frames span orders of magnitude, so
+// every residual is divided by the region scale s: the 99th percentile of X over the valid pixels
+// of the region around the ghosts being fitted (never below 3 noise σ). A ghost at 1e-4 of the
+// light's brightness then weighs as much in its own fit as a bright one in its own, convergence
+// tolerances mean the same for both, and the robust loss ρ has one scale for all.
+//
+// ρ is Cauchy's loss ρ(u) = b·ln(1 + u/b), b = loss_scale², applied per pixel
+// (shared/FITTING_NOTES.md: per-pixel blocks with Cauchy 0.2 cut the bias from an unmodelled
+// bright blob from 0.74 px to 0.13 px): what the model does not explain (the light's halo and
+// starburst, neighbours, noise) then pulls on the fit with bounded force.
+//
+// Masks: pixels that are saturated or non-finite in the frame carry no data residual; edge
+// residuals within the filter's radius of such a pixel are left out too (E∗X is wrong there).
+//
+// The region: the union of the fitted ghosts' pixel bounds (model/model_renderer.h
+// ghostPixelBounds), grown by region_margin_px and clipped to the image. Regions larger than
+// max_pixels are sampled on a regular stride (every pixel still enters through the filters).
+//
+// Derivatives: the model is linear in nothing but Ib, Ii, yet every parameter's derivative image
+// is analytic (model/'s renderer, envelope theorem at the fixed nearest point); E is linear, so
+// the Jacobian of r_edge is E applied to those images.
+
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "model/ghost_shape.h"
+#include "model/model_renderer.h"
+
+namespace flarekit::fit {
+
+struct CostOptions {
+  double edge_weight = 1.0;      // λ: weight of the edge term against the MSE term (≥ 0)
+  double edge_sigma1_px = 1.0;   // σ1: Gaussian before the Laplacian, pixels (> 0)
+  double edge_sigma2_px = 1.0;   // σ2: Gaussian after the Laplacian, pixels (> 0)
+  double region_margin_px = 6;   // the fitted region reaches this far beyond the ghosts (≥ 0)
+  double loss_scale = 0.2;       // Cauchy loss scale in normalised units; 0 = plain least squares
+  int max_pixels = 30000;        // larger regions are sampled on a stride (≥ 1000)
+
+  bool IsValid(std::string* error) const;
+};
+
+// E = G_σ2 ∗ Lap ∗ G_σ1 (scale-normalised, see above), per channel, on CV_32FC1/3 images.
+class EdgeFilter {
+ public:
+  explicit EdgeFilter(const CostOptions& options);
+  // E∗image with replicated borders; same size and type.
+  cv::Mat apply(const cv::Mat& image) const;
+  // Pixels beyond which the filter's support is negligible (3σ of each Gaussian + 1).
+  int radius() const { return radius_; }
+
+ private:
+  double sigma1_, sigma2_, scale_;
+  int radius_;
+};
+
+// What the cost needs from one frame, computed once per frame.
+struct FrameData {
+  cv::Mat image;       // X: CV_32FC(channels), non-finite set to 0
+  cv::Mat valid;       // CV_8U 255 = finite and not saturated
+  cv::Mat edge;        // E∗X
+  cv::Mat edge_valid;  // CV_8U: valid, eroded by the filter radius
+  double noise_sigma = 0;  // robust noise estimate of the background (luminance), same units
+  int channels = 1;
+
+  static FrameData make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge);
+};
+
+// Robust noise σ of an image: 1.4826 × the median absolute deviation of the luminance of its
+// fainter half (the background), from a subsample.
+double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
+
+// The cost of one group of ghosts (those that overlap, fitted jointly) in one frame. Holds the
+// residual and Jacobian images at the last evaluated point. Not thread-safe itself; Ceres's
+// residual blocks read it concurrently only after evaluate() returned.
+class GroupCost {
+ public:
+  // `others`: a full-frame image of the ghosts modelled outside this group (may be empty), which
+  // is subtracted from X. `seeds` fix the region and the number of ghosts.
+  GroupCost(const FrameData& frame, const EdgeFilter& edge, const cv::Mat& others,
+            std::span<const model::GhostParameters> seeds, const CostOptions& options);
+
+  int ghostCount() const { return ghost_count_; }
+  int parametersPerGhost() const { return parameters_per_ghost_; }
+  int channels() const { return channels_; }
+  cv::Rect region() const { return region_; }
+  double scale() const { return scale_; }
+  double lossScale() const { return options_.loss_scale; }
+  cv::Size imageSize() const { return frame_.image.size(); }
+  // Sampled pixels, region coordinates.
+  const std::vector<cv::Point>& samples() const { return samples_; }
+  // Residuals per sample: 2·channels (data then edge per channel).
+  int residualsPerSample() const { return 2 * channels_; }
+
+  // Evaluates residual images (and Jacobian images when asked) at `ghosts`; returns the cost.
+  double evaluate(std::span<const model::GhostParameters> ghosts, bool jacobians);
+  // Evaluates from flat parameter vectors (one per ghost).
+  double evaluate(const std::vector<const double*>& parameters, bool jacobians);
+  // Number of evaluate() calls so far (cost evaluations, with or without derivatives).
+  long long evaluations() const { return evaluations_; }
+
+  // Per-sample residuals and Jacobian rows at the last evaluated point (derivatives only when the
+  // last evaluate() computed them): residuals[2·channels], jacobian of ghost g row-major
+  // [2·channels × parametersPerGhost()].
+  void sampleResiduals(int sample, double* residuals) const;
+  void sampleJacobian(int sample, int ghost, double* jacobian) const;
+  bool hasJacobians() const { return has_jacobians_; }
+
+  // The Cauchy loss ρ(u) of this cost (u = squared norm of a sample's residuals).
+  double loss(double squared_norm) const;
+  // The cost from the stored residuals.
+  double totalCost() const;
+
+  // The model image over the region at the last evaluated point (CV_32FC(channels)).
+  const cv::Mat& modelImage() const { return model_; }
+  // The target X − others over the region.
+  const cv::Mat& target() const { return target_; }
+
+ private:
+  const FrameData& frame_;
+  const EdgeFilter& edge_;
+  CostOptions options_;
+  int ghost_count_ = 0, parameters_per_ghost_ = 0, channels_ = 1;
+  cv::Rect region_;        // in the image
+  cv::Rect grown_;         // region grown by the filter radius (may leave the image)
+  double scale_ = 1;
+  std::vector<cv::Point> samples_;
+  cv::Mat target_, target_edge_;  // over region
+  cv::Mat data_valid_, edge_valid_;
+  cv::Mat model_;                 // Y over region
+  cv::Mat residual_data_, residual_edge_;  // CV_32FC(channels), normalised
+  // Jacobian images [ghost][parameter], normalised; empty Mat = zero.
+  std::vector<std::vector<cv::Mat>> jacobian_data_, jacobian_edge_;
+  std::vector<std::vector<cv::Rect>> jacobian_rect_;  // where each image is non-zero (region coords)
+  bool has_jacobians_ = false;
+  long long evaluations_ = 0;
+};
+
+// The extra bounds a fitter uses on top of model::parameterBounds: lengths and fall-offs within
+// the image's diagonal, the centre within one image size of the frame, intensities up to 20× the
+// region scale.
+model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double scale);
+
+}  // namespace flarekit::fit

@@ -1,0 +1,299 @@
+#include "fit/group_solver.h"
+
+#include <chrono>
+#include <cmath>
+
+#include <ceres/ceres.h>
+
+#include "common/error.h"
+
+namespace flarekit::fit {
+
+std::string optimizerName(Optimizer optimizer) {
+  return optimizer == Optimizer::kCeres ? "ceres" : "walch-gd";
+}
+
+Optimizer parseOptimizer(const std::string& name) {
+  if (name == "ceres") return Optimizer::kCeres;
+  if (name == "walch-gd") return Optimizer::kWalchGd;
+  throw InputError("unknown optimizer \"" + name + "\" (use ceres or walch-gd)");
+}
+
+bool SolverOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (max_iterations < 1) return fail("max_iterations must be ≥ 1");
+  if (!(function_tolerance > 0)) return fail("function_tolerance must be > 0");
+  if (!(parameter_tolerance > 0)) return fail("parameter_tolerance must be > 0");
+  if (threads < 1) return fail("threads must be ≥ 1");
+  if (gd_max_iterations < 1) return fail("gd_max_iterations must be ≥ 1");
+  if (!(gd_learning_rate > 0)) return fail("gd_learning_rate must be > 0");
+  if (!(gd_decay > 0 && gd_decay <= 1)) return fail("gd_decay must be in (0, 1]");
+  if (gd_decay_every < 1) return fail("gd_decay_every must be ≥ 1");
+  if (gd_patience < 1) return fail("gd_patience must be ≥ 1");
+  return true;
+}
+
+double parameterStep(int index, int channels, double scale) {
+  using namespace model::param;
+  const model::ParameterLayout layout{channels};
+  if (index <= kH) return 0.5;
+  if (index <= kCr) return 0.02;
+  if (index < layout.fi()) return 0.02 * scale;
+  if (index == layout.fi() || index == layout.fo()) return 0.5;
+  return 0.05;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+std::vector<std::vector<double>> clampedSeeds(const GroupCost& cost,
+                                              std::span<const model::GhostParameters> seeds,
+                                              cv::Size size) {
+  std::vector<std::vector<double>> blocks;
+  for (const auto& s : seeds) {
+    auto v = model::toParameterVector(model::clampToBounds(s));
+    for (size_t k = 0; k < v.size(); ++k) {
+      const auto b = fitBounds(static_cast<int>(k), s.channels, size, cost.scale());
+      v[k] = std::clamp(v[k], b.lower, b.upper);
+    }
+    blocks.push_back(std::move(v));
+  }
+  return blocks;
+}
+
+// Renders once per evaluation point for all residual blocks.
+class RenderCallback : public ceres::EvaluationCallback {
+ public:
+  RenderCallback(GroupCost& cost, std::vector<std::vector<double>>& blocks)
+      : cost_(cost), blocks_(blocks) {}
+  void PrepareForEvaluation(bool evaluate_jacobians, bool new_evaluation_point) override {
+    if (!new_evaluation_point && (!evaluate_jacobians || cost_.hasJacobians()) && evaluated_) return;
+    std::vector<const double*> p;
+    for (const auto& b : blocks_) p.push_back(b.data());
+    cost_.evaluate(p, evaluate_jacobians);
+    evaluated_ = true;
+  }
+
+ private:
+  GroupCost& cost_;
+  std::vector<std::vector<double>>& blocks_;
+  bool evaluated_ = false;
+};
+
+// One sampled pixel: its data and edge residuals, analytic Jacobians from the shared images.
+class PixelResidual : public ceres::CostFunction {
+ public:
+  PixelResidual(const GroupCost& cost, int sample) : cost_(cost), sample_(sample) {
+    set_num_residuals(cost.residualsPerSample());
+    for (int g = 0; g < cost.ghostCount(); ++g)
+      mutable_parameter_block_sizes()->push_back(cost.parametersPerGhost());
+  }
+  bool Evaluate(double const* const* /*parameters*/, double* residuals,
+                double** jacobians) const override {
+    cost_.sampleResiduals(sample_, residuals);
+    if (jacobians != nullptr)
+      for (int g = 0; g < cost_.ghostCount(); ++g)
+        if (jacobians[g] != nullptr) cost_.sampleJacobian(sample_, g, jacobians[g]);
+    return true;
+  }
+
+ private:
+  const GroupCost& cost_;
+  int sample_;
+};
+
+class TraceCallback : public ceres::IterationCallback {
+ public:
+  TraceCallback(const GroupCost& cost, Clock::time_point t0, std::vector<TracePoint>& trace)
+      : cost_(cost), t0_(t0), trace_(trace) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+    if (s.step_is_successful || s.iteration == 0)
+      trace_.push_back({since(t0_), cost_.evaluations(), s.cost});
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  const GroupCost& cost_;
+  Clock::time_point t0_;
+  std::vector<TracePoint>& trace_;
+};
+
+GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameters> seeds,
+                          const SolverOptions& options, cv::Size size) {
+  const auto t0 = Clock::now();
+  const long long evaluations0 = cost.evaluations();
+  GroupFitResult result;
+  auto blocks = clampedSeeds(cost, seeds, size);
+  const int channels = cost.channels();
+  if (cost.samples().empty()) {
+    for (const auto& b : blocks) result.ghosts.push_back(model::fromParameterVector(b, channels));
+    result.termination = "no valid pixels";
+    return result;
+  }
+  RenderCallback render(cost, blocks);
+  ceres::Problem::Options problem_options;
+  problem_options.evaluation_callback = &render;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  std::unique_ptr<ceres::LossFunction> loss;
+  // Per-pixel Cauchy loss (FITTING_NOTES: robust against unmodelled blobs at the same cost).
+  // Ceres's CauchyLoss(a) is ρ(u) = a²·ln(1 + u/a²), the same as GroupCost::loss.
+  std::vector<double*> pointers;
+  for (auto& b : blocks) pointers.push_back(b.data());
+  loss.reset(cost.lossScale() > 0 ? new ceres::CauchyLoss(cost.lossScale()) : nullptr);
+  for (size_t i = 0; i < cost.samples().size(); ++i)
+    problem.AddResidualBlock(new PixelResidual(cost, static_cast<int>(i)), loss.get(), pointers);
+  for (size_t g = 0; g < blocks.size(); ++g)
+    for (size_t k = 0; k < blocks[g].size(); ++k) {
+      const auto b = fitBounds(static_cast<int>(k), channels, size, cost.scale());
+      problem.SetParameterLowerBound(pointers[g], static_cast<int>(k), b.lower);
+      if (b.upper < model::kUnbounded)
+        problem.SetParameterUpperBound(pointers[g], static_cast<int>(k), b.upper);
+    }
+  ceres::Solver::Options so;
+  so.minimizer_type = ceres::TRUST_REGION;
+  so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = options.max_iterations;
+  so.function_tolerance = options.function_tolerance;
+  so.parameter_tolerance = options.parameter_tolerance;
+  so.num_threads = options.threads;
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  std::unique_ptr<TraceCallback> trace;
+  if (options.record_trace) {
+    trace = std::make_unique<TraceCallback>(cost, t0, result.trace);
+    so.callbacks.push_back(trace.get());
+    so.update_state_every_iteration = true;
+  }
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  for (const auto& b : blocks) result.ghosts.push_back(model::fromParameterVector(b, channels));
+  result.initial_cost = summary.initial_cost;
+  result.final_cost = summary.final_cost;
+  result.iterations = static_cast<int>(summary.iterations.size());
+  result.evaluations = cost.evaluations() - evaluations0;
+  result.seconds = since(t0);
+  result.termination = ceres::TerminationTypeToString(summary.termination_type);
+  if (!summary.IsSolutionUsable()) result.termination += ": " + summary.message;
+  return result;
+}
+
+GroupFitResult solveWalchGd(GroupCost& cost, std::span<const model::GhostParameters> seeds,
+                            const SolverOptions& options, cv::Size size) {
+  const auto t0 = Clock::now();
+  const long long evaluations0 = cost.evaluations();
+  GroupFitResult result;
+  auto blocks = clampedSeeds(cost, seeds, size);
+  const int channels = cost.channels();
+  const int n = cost.parametersPerGhost();
+  auto evaluate = [&] {
+    std::vector<const double*> p;
+    for (const auto& b : blocks) p.push_back(b.data());
+    return cost.evaluate(p, false);
+  };
+  double current = evaluate();
+  result.initial_cost = current;
+  if (options.record_trace) result.trace.push_back({since(t0), cost.evaluations() - evaluations0, current});
+  double learning_rate = options.gd_learning_rate;
+  int since_improvement = 0;
+  int iteration = 0;
+  result.termination = "max iterations";
+  for (; iteration < options.gd_max_iterations; ++iteration) {
+    // §3.3.2: "the learning rate is reduced after every 100 iterations by 20 %".
+    if (iteration > 0 && iteration % options.gd_decay_every == 0) learning_rate *= options.gd_decay;
+    bool improved = false;
+    // Fixed order, shape before shade: parameter index order is shape (Mx..Cr) then intensity.
+    for (size_t g = 0; g < blocks.size(); ++g) {
+      for (int k = 0; k < n; ++k) {
+        const auto b = fitBounds(k, channels, size, cost.scale());
+        const double h = learning_rate * parameterStep(k, channels, cost.scale());
+        const double q = blocks[g][k];
+        const double plus = std::min(q + h, b.upper), minus = std::max(q - h, b.lower);
+        blocks[g][k] = plus;
+        const double c_plus = evaluate();
+        blocks[g][k] = minus;
+        const double c_minus = evaluate();
+        // The central difference says which way the cost falls; the online update takes that
+        // step at once when it lowers the cost (the next parameter sees the new value).
+        const double gradient = (c_plus - c_minus) / std::max(plus - minus, 1e-300);
+        const double candidate = gradient > 0 ? minus : plus;
+        const double c_candidate = gradient > 0 ? c_minus : c_plus;
+        if (c_candidate < current) {
+          blocks[g][k] = candidate;
+          current = c_candidate;
+          improved = true;
+        } else {
+          blocks[g][k] = q;
+        }
+      }
+    }
+    if (options.record_trace)
+      result.trace.push_back({since(t0), cost.evaluations() - evaluations0, current});
+    since_improvement = improved ? 0 : since_improvement + 1;
+    if (since_improvement >= options.gd_patience) {
+      result.termination = "no progress";
+      ++iteration;
+      break;
+    }
+  }
+  evaluate();  // leave the cost's images at the result
+  for (const auto& b : blocks) result.ghosts.push_back(model::fromParameterVector(b, channels));
+  result.final_cost = current;
+  result.iterations = iteration;
+  result.evaluations = cost.evaluations() - evaluations0;
+  result.seconds = since(t0);
+  return result;
+}
+
+class WholeGroupCost : public ceres::CostFunction {
+ public:
+  explicit WholeGroupCost(GroupCost& cost) : cost_(cost) {
+    set_num_residuals(static_cast<int>(cost.samples().size()) * cost.residualsPerSample());
+    for (int g = 0; g < cost.ghostCount(); ++g)
+      mutable_parameter_block_sizes()->push_back(cost.parametersPerGhost());
+  }
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    std::vector<const double*> p(parameters, parameters + cost_.ghostCount());
+    cost_.evaluate(p, jacobians != nullptr);
+    const int m = cost_.residualsPerSample(), n = cost_.parametersPerGhost();
+    std::vector<double> row(static_cast<size_t>(m) * n);
+    for (size_t i = 0; i < cost_.samples().size(); ++i) {
+      cost_.sampleResiduals(static_cast<int>(i), residuals + i * m);
+      if (jacobians == nullptr) continue;
+      for (int g = 0; g < cost_.ghostCount(); ++g) {
+        if (jacobians[g] == nullptr) continue;
+        cost_.sampleJacobian(static_cast<int>(i), g, jacobians[g] + i * m * n);
+      }
+    }
+    return true;
+  }
+
+ private:
+  GroupCost& cost_;
+};
+
+}  // namespace
+
+std::unique_ptr<ceres::CostFunction> makeGroupCostFunction(GroupCost& cost) {
+  return std::make_unique<WholeGroupCost>(cost);
+}
+
+GroupFitResult solveGroup(GroupCost& cost, std::span<const model::GhostParameters> seeds,
+                          const SolverOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument("SolverOptions: " + error);
+  const cv::Size size = cost.imageSize();
+  return options.optimizer == Optimizer::kCeres ? solveCeres(cost, seeds, options, size)
+                                                : solveWalchGd(cost, seeds, options, size);
+}
+
+}  // namespace flarekit::fit
