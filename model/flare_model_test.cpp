@@ -1,3 +1,188 @@
+#include "model/flare_model.h"
+
 #include <gtest/gtest.h>
 
-#include "model/flare_model.h"
+#include <cmath>
+#include <fstream>
+#include <random>
+
+#include <nlohmann/json.hpp>
+
+#include "common/error.h"
+#include "common/testing.h"
+
+namespace flarekit::model {
+namespace {
+
+using flarekit::testing::TempDir;
+
+// A model with two grey ghosts whose parameters are valid over their ranges.
+FlareModel sampleModel(int channels = 1) {
+  FlareModel m;
+  m.capture = {"Canon EOS 5D Mark II", "EF 24mm f/1.4L II", 1.4, 100, 1.0, "Olympus CLV-S",
+               cv::Size(320, 200), 6.4, 0.2};
+  m.channels = channels;
+  const std::vector<double> base = toParameterVector([&] {
+    GhostParameters g;
+    g.channels = channels;
+    g.center_x = 160;
+    g.center_y = 100;
+    g.left = 20;
+    g.right = 15;
+    g.height = 18;
+    g.border = {1.0, 0.8, 0.6};
+    g.inside = {0.2, 0.3, 0.1};
+    g.inside_falloff = 6;
+    g.outside_falloff = 3;
+    return g;
+  }());
+  for (int id : {3, 7}) {
+    GhostTrack t;
+    t.id = id;
+    t.angle_min_deg = id == 3 ? -10 : 0;
+    t.angle_max_deg = id == 3 ? 12.5 : 30;
+    for (size_t k = 0; k < base.size(); ++k) t.parameters.push_back(Polynomial{{base[k]}});
+    // Mx moves with θ (positive θ moves the light image to −x), the size grows a little.
+    t.parameters[param::kMx].coefficients = {160, -3.25 * (id == 3 ? 1 : -0.5), 0.011};
+    t.parameters[param::kL].coefficients = {20, 0.1, 0.0013};
+    m.ghosts.push_back(t);
+  }
+  return m;
+}
+
+std::string writeModelText(const TempDir& dir, const std::string& name, const nlohmann::json& j) {
+  const std::string path = (dir / name).string();
+  std::ofstream(path) << j.dump(2);
+  return path;
+}
+
+TEST(FlareModel, PolynomialEvaluationIsExact) {
+  // Integer coefficients and angles: Horner's rule is exact, so the value must equal the integer.
+  const Polynomial p{{-7, 3, 0, 2}};  // 2θ³ + 3θ − 7
+  for (int theta = -20; theta <= 20; ++theta)
+    EXPECT_EQ(p.evaluate(theta), 2.0 * theta * theta * theta + 3.0 * theta - 7.0);
+  EXPECT_EQ(Polynomial{}.evaluate(3), 0.0);
+  // A fractional case checked by hand: 0.5 + 0.25·2 + 0.125·4 = 1.5.
+  EXPECT_EQ((Polynomial{{0.5, 0.25, 0.125}}.evaluate(2)), 1.5);
+}
+
+TEST(FlareModel, GhostsExistOnlyWithinTheirRange) {
+  const FlareModel m = sampleModel();
+  EXPECT_TRUE(m.IsValid(nullptr));
+  auto ids = [&](double a) {
+    std::vector<int> out;
+    for (const auto& g : m.ghostsAt(a)) out.push_back(g.id);
+    return out;
+  };
+  EXPECT_EQ(ids(-10), std::vector<int>({3}));      // the range includes its ends
+  EXPECT_EQ(ids(-10.0001), std::vector<int>());
+  EXPECT_EQ(ids(5), std::vector<int>({3, 7}));
+  EXPECT_EQ(ids(12.5), std::vector<int>({3, 7}));
+  EXPECT_EQ(ids(12.5001), std::vector<int>({7}));
+  EXPECT_EQ(ids(31), std::vector<int>());
+  // The evaluated parameters are the polynomials at θ.
+  const auto at = m.ghostsAt(4);
+  EXPECT_EQ(at[0].parameters.center_x, m.ghosts[0].parameters[param::kMx].evaluate(4));
+  EXPECT_EQ(at[0].parameters.left, m.ghosts[0].parameters[param::kL].evaluate(4));
+  // A ghost outside its range contributes nothing to the render.
+  FlareModel only7 = m;
+  only7.ghosts.erase(only7.ghosts.begin());
+  const cv::Mat both = m.render(20), one = only7.render(20);
+  EXPECT_EQ(cv::norm(both, one, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::sum(m.render(5))[0], cv::sum(m.render(20))[0]);
+}
+
+TEST(FlareModel, FileRoundTripIsExact) {
+  TempDir dir;
+  for (int channels : {1, 3}) {
+    FlareModel m = sampleModel(channels);
+    // Awkward doubles must survive the text file bit for bit.
+    std::mt19937 rng(4);
+    std::uniform_real_distribution<double> tiny(-1e-3, 1e-3);
+    for (auto& g : m.ghosts)
+      for (auto& p : g.parameters) p.coefficients.push_back(tiny(rng) * 1e-4);
+    m.ghosts[0].parameters[param::kMy].coefficients[0] = 100.1 + 1.0 / 3.0;
+    const auto path = dir / ("model" + std::to_string(channels) + ".json");
+    m.save(path);
+    const FlareModel back = FlareModel::load(path);
+    EXPECT_EQ(back.toJson(), m.toJson());
+    ASSERT_EQ(back.ghosts.size(), m.ghosts.size());
+    for (size_t i = 0; i < m.ghosts.size(); ++i)
+      for (size_t k = 0; k < m.ghosts[i].parameters.size(); ++k)
+        EXPECT_EQ(back.ghosts[i].parameters[k].coefficients, m.ghosts[i].parameters[k].coefficients);
+    EXPECT_EQ(back.capture.lens, m.capture.lens);
+    EXPECT_EQ(back.capture.image_size, m.capture.image_size);
+    EXPECT_EQ(back.capture.exposure_s, m.capture.exposure_s);
+    EXPECT_EQ(cv::norm(back.render(3, 10), m.render(3, 10), cv::NORM_INF), 0.0);
+  }
+}
+
+TEST(FlareModel, RenderAtAnotherSizeScalesAboutTheCentre) {
+  const FlareModel m = sampleModel();
+  const cv::Mat full = m.render(0);
+  const cv::Mat half = m.render(0, 0, cv::Size(160, 100));
+  ASSERT_EQ(half.size(), cv::Size(160, 100));
+  // Same radiance, a quarter of the area.
+  EXPECT_NEAR(cv::sum(half)[0] * 4, cv::sum(full)[0], 0.05 * cv::sum(full)[0]);
+}
+
+// Every way a model file can be wrong gives an InputError that names the file and the key.
+TEST(FlareModel, BadFilesAreRejectedWithTheFileAndKey) {
+  TempDir dir;
+  const nlohmann::json good = sampleModel().toJson();
+  struct Case {
+    std::string name;
+    std::function<void(nlohmann::json&)> edit;
+    std::string expect;  // part of the message
+  };
+  const std::vector<Case> cases = {
+      {"wrong_format", [](auto& j) { j["format"] = "flarekit.lens"; }, "format"},
+      {"wrong_version", [](auto& j) { j["version"] = 2; }, "version"},
+      {"missing_capture", [](auto& j) { j.erase("capture"); }, "capture"},
+      {"missing_lens", [](auto& j) { j["capture"].erase("lens"); }, "lens"},
+      {"missing_parameter", [](auto& j) { j["ghosts"][1]["parameters"].erase("Cl"); }, "ghosts[1].parameters"},
+      {"unknown_parameter", [](auto& j) { j["ghosts"][0]["parameters"]["Zz"] = {1}; }, "Zz"},
+      {"nan_coefficient", [](auto& j) { j["ghosts"][0]["parameters"]["Mx"][1] = nullptr; }, "Mx"},
+      {"string_coefficient", [](auto& j) { j["ghosts"][0]["parameters"]["Fo"] = {"NaN"}; }, "Fo"},
+      {"negative_size", [](auto& j) { j["ghosts"][0]["parameters"]["h"] = {-4}; }, "h"},
+      {"negative_image_width", [](auto& j) { j["capture"]["image_width"] = -1280; }, "image_width"},
+      {"zero_pitch", [](auto& j) { j["capture"]["pixel_pitch_um"] = 0; }, "pixel_pitch_um"},
+      {"empty_range", [](auto& j) { j["ghosts"][0]["angle_max_deg"] = -20; }, "empty angle range"},
+      {"duplicate_id", [](auto& j) { j["ghosts"][1]["id"] = 3; }, "duplicate"},
+      {"bad_channels", [](auto& j) { j["channels"] = 2; }, "channels"},
+      {"empty_polynomial", [](auto& j) { j["ghosts"][1]["parameters"]["Ei"] = nlohmann::json::array(); }, "Ei"},
+      {"size_goes_negative", [](auto& j) { j["ghosts"][1]["parameters"]["R"] = {15, -1}; }, "R"},
+      {"ghosts_not_array", [](auto& j) { j["ghosts"] = 3; }, "ghosts"},
+  };
+  for (const Case& c : cases) {
+    nlohmann::json j = good;
+    c.edit(j);
+    const std::string path = writeModelText(dir, c.name + ".json", j);
+    try {
+      FlareModel::load(path);
+      ADD_FAILURE() << c.name << " was accepted";
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(path), std::string::npos) << c.name << ": " << what;
+      EXPECT_NE(what.find(c.expect), std::string::npos) << c.name << ": " << what;
+      EXPECT_EQ(what.find('\n'), std::string::npos) << c.name;
+    }
+  }
+  // Not JSON at all, and a missing file.
+  const std::string garbage = (dir / "garbage.json").string();
+  std::ofstream(garbage) << "{ \"format\": ";
+  EXPECT_THROW(FlareModel::load(garbage), InputError);
+  EXPECT_THROW(FlareModel::load(dir / "missing.json"), InputError);
+}
+
+TEST(FlareModel, SaveRefusesAnInvalidModel) {
+  TempDir dir;
+  FlareModel m = sampleModel();
+  m.ghosts[0].angle_max_deg = -50;
+  EXPECT_FALSE(m.IsValid(nullptr));
+  EXPECT_THROW(m.save(dir / "bad.json"), std::invalid_argument);
+  EXPECT_FALSE(std::filesystem::exists(dir / "bad.json"));
+}
+
+}  // namespace
+}  // namespace flarekit::model
