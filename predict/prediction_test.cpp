@@ -1,1 +1,244 @@
+// Prediction end to end on hand-made models: the flare follows the light's direction, scales by
+// Eq. 2, vanishes for lights out of range or behind the camera; ratings, ranking, map, report.
+#include "predict/prediction.h"
+
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common/error.h"
+#include "common/testing.h"
+#include "predict/report.h"
+
+namespace flarekit::predict {
+namespace {
+
+constexpr double kRad = std::numbers::pi / 180.0;
+
+model::Polynomial poly(std::vector<double> c) { return {std::move(c)}; }
+
+// One grey ghost valid for 0 ≤ θ ≤ 30: a disc of radius 12 that moves 6 px per degree to +x at
+// roll 0 (away from the light, which is at −x for positive θ), intensity 1.
+model::FlareModel oneGhostModel() {
+  model::FlareModel m;
+  m.capture.camera = "test";
+  m.capture.lens = "test lens";
+  m.capture.f_number = 8;
+  m.capture.iso = 100;
+  m.capture.exposure_s = 0.01;
+  m.capture.light = "test light";
+  m.capture.image_size = {300, 200};
+  m.capture.pixel_pitch_um = 6;
+  m.capture.angle_step_deg = 1;
+  m.channels = 1;
+  model::GhostTrack g;
+  g.id = 1;
+  g.angle_min_deg = 0;
+  g.angle_max_deg = 30;
+  const double k = model::kEllipseCurvature;
+  // Mx My L R h Cl Cr Ib Ii Fi Ei Fo Eo
+  g.parameters = {poly({150, 6}), poly({100}), poly({12}), poly({12}), poly({12}), poly({k}), poly({k}),
+                  poly({1}),      poly({1}),   poly({4}),  poly({1}),  poly({2}),  poly({1})};
+  m.ghosts.push_back(g);
+  return m;
+}
+
+Scene sceneWithLights(std::vector<std::pair<double, double>> azimuth_elevation_deg, double intensity_cd = 1000) {
+  Scene s;
+  s.name = "test";
+  s.camera.pose = {0, {0, 0, 0}, {0, 0, -1}, {0, 1, 0}};
+  s.camera.focal_length_mm = 24;
+  s.camera.sensor_width_mm = 36;
+  s.camera.sensor_height_mm = 24;
+  s.camera.f_number = 8;
+  s.camera.iso = 100;
+  s.camera.exposure_s = 0.01;
+  s.background_level = 0.01;
+  for (auto [az, el] : azimuth_elevation_deg) {
+    SceneLight l;
+    l.name = cv::format("light %.0f/%.0f", az, el);
+    l.kind = LightKind::kIntensity;
+    l.intensity_cd = intensity_cd;
+    const double a = az * kRad, e = el * kRad;
+    l.position = {10 * std::sin(a) * std::cos(e), 10 * std::sin(e), -10 * std::cos(a) * std::cos(e)};
+    s.lights.push_back(l);
+  }
+  return s;
+}
+
+cv::Point2d centroid(const cv::Mat& rgb) {
+  cv::Mat y;
+  cv::extractChannel(rgb, y, 1);
+  const cv::Moments mo = cv::moments(y);
+  return {mo.m10 / mo.m00, mo.m01 / mo.m00};
+}
+
+TEST(PredictOptions, DefaultsAreValidAndBadValuesAreNot) {
+  std::string error;
+  EXPECT_TRUE(PredictOptions{}.IsValid(&error)) << error;
+  PredictOptions o;
+  o.capture_illuminance_lux = 0;
+  EXPECT_FALSE(o.IsValid(&error));
+  o = {};
+  o.map_roll_steps = 1;
+  EXPECT_FALSE(o.IsValid(&error));
+  o = {};
+  o.image_width_px = -1;
+  EXPECT_FALSE(o.IsValid(&error));
+  o = {};
+  o.estimators.log_epsilon = -1;
+  EXPECT_FALSE(o.IsValid(&error));
+}
+
+TEST(Prediction, GhostsLieOppositeTheLightInEveryDirection) {
+  const model::FlareModel m = oneGhostModel();
+  const cv::Size size{300, 200};
+  const cv::Point2d centre{150, 100};
+  struct Case {
+    double az, el;
+    cv::Point2d expected_side;  // unit direction of the ghost from the centre
+  };
+  for (const Case& c : {Case{-10, 0, {1, 0}}, Case{10, 0, {-1, 0}}, Case{0, 10, {0, 1}}, Case{0, -10, {0, -1}}}) {
+    const Scene s = sceneWithLights({{c.az, c.el}});
+    const cv::Mat overlay = renderOverlay(m, s, s.camera.pose, size, PredictOptions{});
+    const cv::Point2d d = centroid(overlay) - centre;
+    // 10° → 60 capture px from the centre, opposite the light.
+    EXPECT_NEAR(d.x, 60 * c.expected_side.x, 1.0) << c.az << "/" << c.el;
+    EXPECT_NEAR(d.y, 60 * c.expected_side.y, 1.0) << c.az << "/" << c.el;
+  }
+}
+
+TEST(Prediction, OutOfRangeAndBehindLightsAddNothing) {
+  const model::FlareModel m = oneGhostModel();
+  const Scene s = sceneWithLights({{40, 0}, {0, 150}, {100, 0}});
+  std::vector<LightPrediction> lights;
+  const cv::Mat overlay = renderOverlay(m, s, s.camera.pose, {300, 200}, PredictOptions{}, &lights);
+  EXPECT_EQ(cv::countNonZero(overlay.reshape(1)), 0);
+  ASSERT_EQ(lights.size(), 3u);
+  EXPECT_EQ(lights[0].geometry.status, LightStatus::kOutOfRange);
+  EXPECT_EQ(lights[1].geometry.status, LightStatus::kBehindCamera);
+  EXPECT_EQ(lights[2].geometry.status, LightStatus::kBehindCamera);
+  for (const auto& l : lights) EXPECT_EQ(l.ghost_count, 0);
+}
+
+TEST(Prediction, OverlayScalesWithEq2AndLightsAdd) {
+  const model::FlareModel m = oneGhostModel();
+  const cv::Size size{300, 200};
+  Scene a = sceneWithLights({{-8, 0}});
+  Scene b = sceneWithLights({{5, 5}});
+  Scene both = sceneWithLights({{-8, 0}, {5, 5}});
+  const PredictOptions o;
+  const double sum_a = cv::sum(renderOverlay(m, a, a.camera.pose, size, o))[1];
+  const double sum_b = cv::sum(renderOverlay(m, b, b.camera.pose, size, o))[1];
+  EXPECT_NEAR(cv::sum(renderOverlay(m, both, both.camera.pose, size, o))[1], sum_a + sum_b, 1e-4 * (sum_a + sum_b));
+  // Twice the scene's exposure time, or twice the light, doubles the flare (Eq. 2).
+  a.camera.exposure_s *= 2;
+  EXPECT_NEAR(cv::sum(renderOverlay(m, a, a.camera.pose, size, o))[1], 2 * sum_a, 1e-4 * sum_a);
+  a.camera.exposure_s /= 2;
+  a.lights[0].intensity_cd *= 2;
+  EXPECT_NEAR(cv::sum(renderOverlay(m, a, a.camera.pose, size, o))[1], 2 * sum_a, 1e-4 * sum_a);
+  // One stop more on the capture side (brighter reference) halves it.
+  PredictOptions brighter = o;
+  brighter.capture_illuminance_lux *= 2;
+  a.lights[0].intensity_cd /= 2;
+  EXPECT_NEAR(cv::sum(renderOverlay(m, a, a.camera.pose, size, brighter))[1], 0.5 * sum_a, 1e-4 * sum_a);
+}
+
+TEST(Prediction, AnalyzeRanksRatesAndMaps) {
+  const model::FlareModel m = oneGhostModel();
+  // The same light at 5° and at 20°, and one out of range. Farther off-axis the ghost leaves the
+  // frame partly, so the 5° light has the larger mean.
+  Scene s = sceneWithLights({{-25, 0}, {-5, 0}, {45, 0}});
+  s.camera_path = {{0, {0, 0, 0}, {0, 0, -1}, {0, 1, 0}}, {1, {0, 0, 0}, {-0.5, 0, -1}, {0, 1, 0}}};
+  PredictOptions o;
+  o.map_angle_steps = 6;
+  o.map_roll_steps = 8;
+  cv::Mat overlay, composite;
+  const PredictionSummary r = analyze(m, s, o, &overlay, &composite);
+  ASSERT_EQ(r.lights.size(), 3u);
+  EXPECT_EQ(r.lights[1].rank, 1);
+  EXPECT_EQ(r.lights[0].rank, 2);
+  EXPECT_EQ(r.lights[2].rank, 3);
+  EXPECT_GT(r.lights[1].severity, r.lights[0].severity);
+  EXPECT_TRUE(std::isnan(r.lights[2].severity_percentile));
+  for (int k : {0, 1}) {
+    EXPECT_GE(r.lights[k].severity_percentile, 0);
+    EXPECT_LE(r.lights[k].severity_percentile, 100);
+  }
+  ASSERT_EQ(r.ratings.size(), allEstimators().size());
+  for (const auto& rating : r.ratings) EXPECT_EQ(rating.distribution.size(), 31u);  // 0..30 at 1°
+  ASSERT_EQ(r.map.values.size(), 6u);
+  ASSERT_EQ(r.map.values[0].size(), 8u);
+  EXPECT_NEAR(r.map.max_angle_deg, 30, 1e-12);
+  // Near the axis the ghost is in the frame whatever the roll (mean > 0); at the outer ring it
+  // leaves the 300 × 200 frame (6 px/° from the centre) when rolled towards the short side.
+  for (size_t i = 0; i < 3; ++i)
+    for (double v : r.map.values[i]) EXPECT_GT(v, 0) << "ring " << i;
+  const auto& outer = r.map.values.back();
+  EXPECT_EQ(*std::min_element(outer.begin(), outer.end()), 0);
+  EXPECT_GT(*std::max_element(outer.begin(), outer.end()), 0);
+  ASSERT_EQ(r.timeline.size(), 2u);
+  EXPECT_EQ(r.timeline[0].lights_in_range, 2);
+  // The composite is the background plus the overlay.
+  EXPECT_NEAR(cv::sum(composite)[1], cv::sum(overlay)[1] + 0.01 * overlay.total(), 1e-3 * cv::sum(composite)[1]);
+  EXPECT_NE(r.BriefReport().find("1 out of range"), std::string::npos) << r.BriefReport();
+  EXPECT_EQ(toJson(r)["lights"].size(), 3u);
+}
+
+TEST(Prediction, SeverityMapCellEqualsTheLightPlacedThere) {
+  // A map cell is the estimator of one light of the map's brightness at that direction: place a
+  // scene light at a cell's (θ, φ) and compare.
+  const model::FlareModel m = oneGhostModel();
+  PredictOptions o;
+  o.map_angle_steps = 4;
+  o.map_roll_steps = 4;
+  o.map_image_width_px = 150;
+  const Scene base = sceneWithLights({{0, 0}});
+  const cv::Size size = predictionImageSize(m, base, 150);
+  const SeverityMap map = severityMap(m, sceneImage(base, size), 1.0, o);
+  const double theta = map.angles_deg[2], phi = map.rolls_deg[1];
+  Scene s = base;
+  const Vec3 d = cameraDirectionFromAngles(theta, phi);  // camera frame = world (x, −y, −z) here
+  s.lights[0].position = {10 * d[0], -10 * d[1], -10 * d[2]};
+  // Brightness 1: the scene light gives the capture's l·α with the same exposure.
+  s.lights[0].intensity_cd = PredictOptions{}.capture_illuminance_lux * 100;
+  const cv::Mat overlay = renderOverlay(m, s, s.camera.pose, size, o);
+  EXPECT_NEAR(computeEstimators(overlay, sceneImage(s, size)).mean, map.values[2][1], 1e-6);
+}
+
+TEST(Report, IsOneSelfContainedPage) {
+  const model::FlareModel m = oneGhostModel();
+  const Scene s = sceneWithLights({{-5, 2}, {3, -4}, {50, 0}});
+  PredictOptions o;
+  o.map_angle_steps = 4;
+  o.map_roll_steps = 6;
+  testing::TempDir dir;
+  const PredictionSummary r = predict(m, s, o, dir / "out", "model.json");
+  for (const char* f : {"overlay.exr", "composite.png", "estimators.json", "report.html"})
+    EXPECT_TRUE(std::filesystem::exists(dir / "out" / f)) << f;
+  const std::string html = reportHtml(r, m, s, cv::Mat(200, 300, CV_32FC3, cv::Scalar::all(0.1)),
+                                      cv::Mat(200, 300, CV_32FC3, cv::Scalar::all(0)));
+  EXPECT_NE(html.find("id=\"severity-map\""), std::string::npos);
+  EXPECT_NE(html.find("data:image/png;base64,"), std::string::npos);
+  for (const auto& l : s.lights) EXPECT_NE(html.find(l.name), std::string::npos);
+  EXPECT_EQ(html.find("http://"), html.find("http://www.w3.org/2000/svg"));  // no external resources
+  EXPECT_EQ(html.find("https://"), std::string::npos);
+  EXPECT_EQ(html.find("<script"), std::string::npos);
+}
+
+TEST(Report, Base64OfKnownStrings) {
+  auto b = [](std::string s) { return base64(std::vector<unsigned char>(s.begin(), s.end())); };
+  EXPECT_EQ(b(""), "");
+  EXPECT_EQ(b("f"), "Zg==");
+  EXPECT_EQ(b("fo"), "Zm8=");
+  EXPECT_EQ(b("foo"), "Zm9v");
+  EXPECT_EQ(b("foobar"), "Zm9vYmFy");
+}
+
+}  // namespace
+}  // namespace flarekit::predict

@@ -6,6 +6,7 @@
 
 #include <tiny_gltf.h>
 
+#include "common/atomic_file.h"
 #include "common/config.h"
 #include "common/error.h"
 #include "common/exr.h"
@@ -79,7 +80,15 @@ double Scene::illuminanceAt(const SceneLight& light, const CameraPose& pose) {
 }
 
 Scene parseSceneJson(const std::string& text, const std::filesystem::path& file) {
-  const ConfigNode root = parseJson(text, file.string());
+  std::optional<ConfigNode> parsed;
+  try {
+    parsed = parseJson(text, file.string());
+  } catch (const nlohmann::json::exception& e) {
+    // common's parseJson turns syntax errors into InputError; numbers that overflow (1e999) come
+    // through as nlohmann's out_of_range.
+    throw InputError(file.string(), std::string("not a valid JSON scene: ") + e.what());
+  }
+  const ConfigNode root = *parsed;
   if (!root.isObject()) root.fail("a scene must be a JSON object");
   checkFormat(root, kSceneFormat, kSceneVersion);
   root.checkKnownKeys({"format", "version", "name", "camera", "lights", "background", "camera_path"});
@@ -374,8 +383,7 @@ Scene loadScene(const std::filesystem::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
   if (ext == ".gltf" || ext == ".glb") return loadGltfScene(path);
-  const ConfigNode root = loadJsonFile(path);
-  return parseSceneJson(root.json().dump(), path);
+  return parseSceneJson(readTextFile(path), path);
 }
 
 }  // namespace flarekit::predict
