@@ -372,7 +372,10 @@ void Session::captureFrame(int index, double angle_deg) {
   }
   // The frame last: the manifest lists a frame only after all its files are whole.
   writeExr(out_ / ("frames/" + name + ".exr"), mergedToExr(merged, meta));
-  entry["attempts"] = attempts_;
+  // Device calls beyond the one move and one capture per exposure: the retries this frame took.
+  entry["retries"] = attempts_ - 1 - static_cast<int>(plan_.exposures_s.size());
+  manifest_["camera"]["white_level_dn"] = bracket[0].white_level;
+  manifest_["camera"]["black_level_dn"] = bracket[0].black_level;
   manifest_["image"]["width"] = bracket[0].data.cols;
   manifest_["image"]["height"] = bracket[0].data.rows;
   manifest_["frames"].push_back(entry);

@@ -48,7 +48,7 @@ void parseGeometry(const ConfigNode& h, StepperGeometry& g) {
   if (h.has("microsteps")) {
     long long m = h["microsteps"].integer();
     if (m < 1 || m > 256 || (m & (m - 1)))
-      h["microsteps"].fail("must be one of 1, 2, 4, ..., 256, got " + std::to_string(m));
+      h["microsteps"].fail("must be a power of two from 1 to 256, got " + std::to_string(m));
     g.microsteps = static_cast<int>(m);
   }
   g.gear_ratio = positive(h, "gear_ratio", g.gear_ratio);
