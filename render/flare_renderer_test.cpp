@@ -1,1 +1,216 @@
+#include "render/flare_renderer.h"
+
+#include <cmath>
+#include <filesystem>
+
 #include <gtest/gtest.h>
+
+#include "common/error.h"
+#include "common/exr.h"
+#include "common/testing.h"
+
+namespace flarekit::render {
+namespace {
+
+Lens lensNamed(const std::string& name) {
+  return loadLens(std::filesystem::path(FLAREKIT_SOURCE_DIR) / "lenses" / name);
+}
+
+FlareRenderOptions small() {
+  FlareRenderOptions o;
+  o.width_px = 240;
+  o.height_px = 160;
+  return o;
+}
+
+TEST(FlareRenderer, DefaultOptionsAreValid) {
+  std::string error;
+  EXPECT_TRUE(FlareRenderOptions{}.IsValid(&error)) << error;
+}
+
+TEST(FlareRenderer, InvalidOptionsAreInputErrors) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  o.grid_size = 1;
+  EXPECT_FALSE(o.IsValid(nullptr));
+  EXPECT_THROW(renderFlare(lens, {5, 0}, o), InputError);
+  o = small();
+  o.spectral_samples = 2;
+  EXPECT_THROW(renderFlare(lens, {5, 0}, o), InputError);
+  o = small();
+  o.f_number = 1.0;  // wider than the lens
+  EXPECT_THROW(renderFlare(lens, {5, 0}, o), InputError);
+  EXPECT_THROW(renderFlare(lens, {NAN, 0}, small()), InputError);
+}
+
+TEST(FlareRenderer, LightImageFollowsTheAngleConventions) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  o.ghost_layers = false;
+  const FlareImage on_axis = renderFlare(lens, {0, 0}, o);
+  EXPECT_NEAR(on_axis.light_image_px.x, 120, 0.05);
+  EXPECT_NEAR(on_axis.light_image_px.y, 80, 0.05);
+  const FlareImage left = renderFlare(lens, {5, 0}, o);
+  // θ > 0 images to −x, about f·tan θ away.
+  const double pitch = 36.0 / 240;
+  EXPECT_NEAR(left.light_image_px.x, 120 - 99.24 * std::tan(5 * M_PI / 180) / pitch, 2.0);
+  EXPECT_NEAR(left.light_image_px.y, 80, 0.05);
+  const FlareImage up = renderFlare(lens, {5, 90}, o);
+  EXPECT_NEAR(up.light_image_px.x, 120, 0.05);
+  EXPECT_LT(up.light_image_px.y, 80 - 20);
+}
+
+TEST(FlareRenderer, TheLightSourceIsFarBrighterThanItsGhosts) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  const FlareImage with = renderFlare(lens, {3, 0}, o);
+  o.light_source = false;
+  const FlareImage ghosts = renderFlare(lens, {3, 0}, o);
+  double peak_all, peak_ghosts;
+  cv::minMaxLoc(with.radiance.reshape(1), nullptr, &peak_all);
+  cv::minMaxLoc(ghosts.radiance.reshape(1), nullptr, &peak_ghosts);
+  EXPECT_GT(peak_all, 1000 * peak_ghosts);
+  // The spot carries the direct flux: about the pupil area (π · 14.47²) over a pixel's area,
+  // times the lens's transmission.
+  const double flux_px = cv::sum(with.radiance - ghosts.radiance)[1];
+  const double pupil_over_pixel = M_PI * 14.465 * 14.465 / (0.15 * 0.15);
+  EXPECT_GT(flux_px, 0.5 * pupil_over_pixel);
+  EXPECT_LT(flux_px, 1.0 * pupil_over_pixel);
+  const cv::Point peak_at = [&] {
+    cv::Point p;
+    cv::Mat g;
+    cv::extractChannel(with.radiance, g, 1);
+    cv::minMaxLoc(g, nullptr, nullptr, nullptr, &p);
+    return p;
+  }();
+  EXPECT_NEAR(peak_at.x + 0.5, with.light_image_px.x, 1.5);
+  EXPECT_NEAR(peak_at.y + 0.5, with.light_image_px.y, 1.5);
+}
+
+// Ghosts of a rotationally symmetric lens lie on the line through the light's image and the
+// image centre (the flare axis).
+TEST(FlareRenderer, GhostsLineUpThroughTheLightAndTheCentre) {
+  const Lens lens = lensNamed("brendel_tessar_100mm_usp2854889.json");
+  FlareRenderOptions o = small();
+  o.ghost_layers = true;
+  o.light_source = false;
+  o.sensor_width_mm = o.sensor_height_mm = 200;  // whole ghosts in view
+  const double roll = 30.0;
+  const FlareImage img = renderFlare(lens, {6, roll}, o);
+  const cv::Point2d c(120, 80);
+  const cv::Point2d axis = img.light_image_px - c;
+  const double len = std::hypot(axis.x, axis.y);
+  ASSERT_GT(len, 3.0);
+  int checked = 0;
+  for (const GhostRecord& g : img.ghosts) {
+    if (g.energy <= 0 || g.bbox_px.width < 3) continue;
+    if (g.bbox_px.x == 0 || g.bbox_px.y == 0 || g.bbox_px.br().x >= o.width_px || g.bbox_px.br().y >= o.height_px)
+      continue;  // cut by the frame: its centroid moves
+    const cv::Point2d d = g.centroid_px - c;
+    const double off_axis = std::abs(d.x * axis.y - d.y * axis.x) / len;
+    EXPECT_LT(off_axis, 0.5) << "ghost " << g.id;
+    ++checked;
+  }
+  EXPECT_GE(checked, 10);
+}
+
+TEST(FlareRenderer, GhostLayersAddUpToTheImageAndCarryTheirTruth) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  o.ghost_layers = true;
+  o.light_source = false;
+  o.max_ghosts = 6;
+  const FlareImage img = renderFlare(lens, {8, 0}, o);
+  ASSERT_EQ(img.ghosts.size(), 6u);
+  cv::Mat sum(img.radiance.size(), CV_32FC3, cv::Scalar::all(0));
+  for (const GhostRecord& g : img.ghosts) sum += g.image;
+  EXPECT_LT(cv::norm(sum, img.radiance, cv::NORM_INF), 1e-4 * cv::norm(img.radiance, cv::NORM_INF));
+  // Ranked by the estimate, brightest first.
+  for (size_t i = 1; i < img.ghosts.size(); ++i)
+    EXPECT_GE(img.ghosts[i - 1].intensity_estimate, img.ghosts[i].intensity_estimate);
+  testing::TempDir dir;
+  writeExr(dir / "flare.exr", toExrImage(img));
+  const ExrImage back = readExr(dir / "flare.exr");
+  EXPECT_EQ(back.layers.size(), 7u);
+  const GhostRecord& g = img.ghosts.front();
+  const std::string key = "flarekit.ghost." + std::to_string(g.id) + ".";
+  ASSERT_TRUE(back.find("ghost." + std::to_string(g.id)));
+  EXPECT_NEAR(*numericAttribute(back.attributes, key + "energy"), g.energy, 1e-9 * g.energy);
+  EXPECT_TRUE(back.attributes.count(key + "surfaces"));
+  EXPECT_TRUE(back.attributes.count(key + "bbox_px"));
+  EXPECT_TRUE(back.attributes.count(key + "centroid_px"));
+  EXPECT_NEAR(*numericAttribute(back.attributes, "flarekit.angle_deg"), 8.0, 0);
+}
+
+TEST(FlareRenderer, CullingOptionsReduceTheGhostList) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  o.light_source = false;
+  EXPECT_EQ(renderFlare(lens, {5, 0}, o).summary.ghosts_rendered, 28);
+  o.same_side_of_stop_only = true;
+  EXPECT_EQ(renderFlare(lens, {5, 0}, o).summary.ghosts_rendered, 13);
+  o.same_side_of_stop_only = false;
+  o.min_relative_intensity = 0.01;
+  const int kept = renderFlare(lens, {5, 0}, o).summary.ghosts_rendered;
+  EXPECT_GT(kept, 0);
+  EXPECT_LT(kept, 28);
+}
+
+TEST(FlareRenderer, CoatingsColourAndDimTheGhosts) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  o.light_source = false;
+  const double coated = cv::sum(renderFlare(lens, {5, 0}, o).radiance)[1];
+  o.uncoated = true;
+  const double bare = cv::sum(renderFlare(lens, {5, 0}, o).radiance)[1];
+  EXPECT_GT(bare, 3 * coated);  // 4 % vs ~1 % per reflection, squared
+  // A coating designed for green reflects least in green: its ghosts turn magenta.
+  o.uncoated = false;
+  o.coating_override_nm = 510;
+  const cv::Scalar s = cv::sum(renderFlare(lens, {5, 0}, o).radiance);
+  EXPECT_LT(s[1], s[0]);
+  EXPECT_LT(s[1], s[2]);
+}
+
+TEST(FlareRenderer, SpectralModeAgreesWithRgbInOverallBrightness) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  o.light_source = false;
+  o.grid_size = 24;
+  const cv::Scalar rgb = cv::sum(renderFlare(lens, {5, 0}, o).radiance);
+  o.spectral_samples = 8;
+  const FlareImage spectral = renderFlare(lens, {5, 0}, o);
+  EXPECT_EQ(spectral.summary.wavelengths, 8);
+  const cv::Scalar s = cv::sum(spectral.radiance);
+  const double y_rgb = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+  const double y_spec = 0.2126 * s[0] + 0.7152 * s[1] + 0.0722 * s[2];
+  EXPECT_NEAR(y_spec / y_rgb, 1.0, 0.5);
+}
+
+TEST(FlareRenderer, MatrixMethodPutsGhostsWhereTheTracerDoes) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = small();
+  o.light_source = false;
+  o.ghost_layers = true;
+  o.f_number = 16;
+  o.sensor_width_mm = o.sensor_height_mm = 200;
+  o.same_side_of_stop_only = true;
+  const FlareImage traced = renderFlare(lens, {2, 0}, o);
+  o.method = RenderMethod::kMatrix;
+  const FlareImage matrix = renderFlare(lens, {2, 0}, o);
+  ASSERT_EQ(traced.ghosts.size(), matrix.ghosts.size());
+  int compared = 0;
+  for (size_t i = 0; i < traced.ghosts.size(); ++i) {
+    const GhostRecord& t = traced.ghosts[i];
+    const GhostRecord& m = matrix.ghosts[i];
+    ASSERT_EQ(t.id, m.id);
+    if (t.energy <= 0 || t.bbox_px.width < 6 || t.bbox_px.x == 0 || t.bbox_px.br().x >= o.width_px) continue;
+    EXPECT_NEAR(m.centroid_px.x, t.centroid_px.x, 0.05 * t.bbox_px.width + 0.5) << t.id;
+    EXPECT_NEAR(m.bbox_px.width, t.bbox_px.width, 0.05 * t.bbox_px.width + 2) << t.id;
+    ++compared;
+  }
+  EXPECT_GE(compared, 5);
+}
+
+}  // namespace
+}  // namespace flarekit::render

@@ -12,6 +12,41 @@
 
 namespace flarekit::render {
 
+namespace {
+// Sub-grid sizes for the cells along discontinuous ghost edges (first level, deeper levels).
+constexpr int kRefine = 8;
+constexpr int kRefineDeeper = 4;
+constexpr int kRefineDepth = 2;
+
+// Builds the triangles of a traced grid; cells across a discontinuous edge (rays turning grazing
+// or dying) are traced again on a kRefine² sub-grid, recursively up to kRefineDepth levels, in the
+// spirit of Bodonyi & Kunkli §4.2 (denser rays only near the ghost's edges).
+void refineCells(const RenderSetup& setup, const CompiledPath& path, const cv::Vec3f& weight,
+                 int batch, const RayGrid& grid, const TracedRays& rays, double cell_flux,
+                 int depth, long long* traced, std::vector<RasterTriangle>* out) {
+  std::vector<int> refine;
+  buildTriangles(rays, setup.mapping, cell_flux, weight, batch, out,
+                 depth < kRefineDepth ? &refine : nullptr);
+  if (refine.empty()) return;
+  const int n = grid.n;
+  const double cell = grid.spacing_mm();
+  const int m = depth == 0 ? kRefine : kRefineDeeper;
+  RayGrid sub;
+  sub.n = m + 1;
+  sub.half_size_mm = 0.5 * cell;
+  TracedRays sub_rays;
+  for (int q : refine) {
+    const int i = q % n, j = q / n;
+    sub.center_x_mm = grid.center_x_mm - grid.half_size_mm + (i + 0.5) * cell;
+    sub.center_y_mm = grid.center_y_mm - grid.half_size_mm + (j + 0.5) * cell;
+    traceGrid(path, setup.direction, sub, &sub_rays);
+    *traced += static_cast<long long>(sub.n) * sub.n;
+    refineCells(setup, path, weight, batch, sub, sub_rays, cell_flux / (m * m), depth + 1, traced, out);
+  }
+}
+
+}  // namespace
+
 std::vector<SurfaceCoating> surfaceCoatings(const Lens& lens, const FlareRenderOptions& options) {
   const double n_c = options.coating_ior > 0 ? options.coating_ior
                                              : lens.coating_ior.value_or(1.38);
@@ -101,8 +136,9 @@ long long traceGhostTriangles(const RenderSetup& setup, const Ghost& ghost, int 
   traceGrid(path, setup.direction, grid, &rays);
   const double cell = grid.spacing_mm();
   const double cell_flux = cell * cell * std::abs(setup.direction[2]) * setup.light_irradiance;
-  buildTriangles(rays, setup.mapping, cell_flux, s.rgb_weight, batch, out);
-  return 33LL * 33 + static_cast<long long>(n) * n;
+  long long traced = 33LL * 33 + static_cast<long long>(n) * n;
+  refineCells(setup, path, s.rgb_weight, batch, grid, rays, cell_flux, 0, &traced, out);
+  return traced;
 }
 
 void splatGhost(const RenderSetup& setup, const Ghost& ghost, int sample, int n, cv::Mat* image) {

@@ -119,7 +119,8 @@ float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, 
 }
 
 void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double cell_flux,
-                    const cv::Vec3f& weight, int batch, std::vector<RasterTriangle>* out) {
+                    const cv::Vec3f& weight, int batch, std::vector<RasterTriangle>* out,
+                    std::vector<int>* refine) {
   const int n = rays.n;
   auto vertex = [&](int i, int j) {
     const size_t k = static_cast<size_t>(j * n + i);
@@ -135,8 +136,21 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double
     for (int i = 0; i + 1 < n; ++i) {
       const size_t k00 = static_cast<size_t>(j * n + i), k10 = k00 + 1;
       const size_t k01 = k00 + static_cast<size_t>(n), k11 = k01 + 1;
-      if (!rays.alive[k00] || !rays.alive[k10] || !rays.alive[k01] || !rays.alive[k11]) continue;
-      if (!valid(k00) && !valid(k10) && !valid(k01) && !valid(k11)) continue;
+      const size_t corner[4] = {k00, k10, k01, k11};
+      bool any_valid = false, all_alive = true;
+      float r_min = 1e30f, r_max = -1e30f;
+      for (size_t c : corner) {
+        all_alive = all_alive && rays.alive[c];
+        any_valid = any_valid || (rays.alive[c] && valid(c));
+        r_min = std::min(r_min, rays.r_rel[c]);
+        r_max = std::max(r_max, rays.r_rel[c]);
+      }
+      if (!any_valid) continue;
+      if (refine && (!all_alive || (r_min <= 1.0f && r_max > 1.0f && r_max - r_min > kRefineJump))) {
+        refine->push_back(j * n + i);
+        continue;
+      }
+      if (!all_alive) continue;
       const RasterVertex v00 = vertex(i, j), v10 = vertex(i + 1, j);
       const RasterVertex v01 = vertex(i, j + 1), v11 = vertex(i + 1, j + 1);
       if (makeTriangle(v00, v10, v11, mapping, cell_flux, weight, batch, &t)) out->push_back(t);

@@ -43,8 +43,14 @@ struct SensorMapping {
 // grid cell (spacing² · |d_z|); `weight` the colour weight of this wavelength. Quads with a dead
 // corner are skipped; so are quads whose four corners all lie outside the ghost (r_rel > 1 or
 // |(u, v)| > 1), as in Bodonyi & Kunkli §4.1. Appends to `out`.
+// When `refine` is given, quads across a discontinuous edge — a dead corner next to a valid one,
+// or r_rel crossing 1 with a jump of more than kRefineJump within the quad (rays turning
+// grazing) — are left out and their indices (j·n + i of the quad's first corner) appended to it,
+// for the caller to trace more finely.
+inline constexpr float kRefineJump = 0.1f;
 void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double cell_flux,
-                    const cv::Vec3f& weight, int batch, std::vector<RasterTriangle>* out);
+                    const cv::Vec3f& weight, int batch, std::vector<RasterTriangle>* out,
+                    std::vector<int>* refine = nullptr);
 
 // Value (before the colour weight) of a triangle at pixel centre (x, y), 0 outside it.
 float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, float y);

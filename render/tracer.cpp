@@ -77,6 +77,9 @@ namespace {
 // of arrays, branch-light so that the compiler can vectorise the arithmetic).
 constexpr int kBlock = 64;
 
+// Slope β of the validity margins folded into r_rel (total internal reflection, missed spheres).
+constexpr double kValidityScale = 4.0;
+
 struct Block {
   double px[kBlock], py[kBlock], pz[kBlock];
   double dx[kBlock], dy[kBlock], dz[kBlock];
@@ -92,6 +95,7 @@ void applyEvent(const CompiledEvent& e, Block& b, int count) {
     if (!b.alive[k]) continue;
     double s;
     double nx = 0.0, ny = 0.0, nz = 1.0;
+    bool flat_here = flat;
     if (flat) {
       if (std::abs(b.dz[k]) < 1e-12) {
         b.alive[k] = false;
@@ -105,12 +109,22 @@ void applyEvent(const CompiledEvent& e, Block& b, int count) {
       const double cc = ox * ox + oy * oy + oz * oz - R * R;
       const double disc = bb * bb - cc;
       if (disc < 0.0) {
-        b.alive[k] = false;  // missed the sphere
-        continue;
+        // Missed the sphere: the ray passes outside every rim (r > |R| > semi-aperture), so it is
+        // not part of the ghost. Rather than dropping it (and with it every grid cell it
+        // touches), it goes on from the vertex plane with r_rel past |R|/semi-aperture, growing
+        // with the miss distance, so cells across the edge are clipped by interpolation.
+        if (std::abs(b.dz[k]) < 1e-12) {
+          b.alive[k] = false;
+          continue;
+        }
+        s = (e.z - b.pz[k]) / b.dz[k];
+        flat_here = true;
+        b.rr[k] = std::max(b.rr[k], std::abs(R) * e.inv_semi - kValidityScale * disc / (R * R));
+      } else {
+        const double sq = std::sqrt(disc);
+        const double s1 = -bb - sq;
+        s = ((oz + s1 * b.dz[k]) * R < 0.0) ? s1 : -bb + sq;
       }
-      const double sq = std::sqrt(disc);
-      const double s1 = -bb - sq;
-      s = ((oz + s1 * b.dz[k]) * R < 0.0) ? s1 : -bb + sq;
     }
     const double x = b.px[k] + s * b.dx[k];
     const double y = b.py[k] + s * b.dy[k];
@@ -132,7 +146,7 @@ void applyEvent(const CompiledEvent& e, Block& b, int count) {
       continue;
     }
     b.rr[k] = std::max(b.rr[k], r * e.inv_semi);
-    if (!flat) {
+    if (!flat_here) {
       nx = x / R;
       ny = y / R;
       nz = (z - cz) / R;  // unit normal, pointing to −z at the vertex
@@ -154,14 +168,26 @@ void applyEvent(const CompiledEvent& e, Block& b, int count) {
       // Vector form of Snell's law.
       const double eta = e.eta;
       const double kk = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+      // Total internal reflection: past the critical angle (kk < 0) the ray leaves this path.
+      // r_rel carries the margin 1 − β·kk, which stays below 1 for every transmitted ray and
+      // crosses 1 exactly at the critical angle, so the rasterizer's interpolation puts the TIR
+      // edge of a ghost where it belongs instead of losing every grid cell that touches it. The
+      // ray itself goes on as the grazing refracted ray (kk = 0), continuous with its
+      // transmitted neighbours, so the cells across the edge keep a sensible shape.
+      b.rr[k] = std::max(b.rr[k], 1.0 - kValidityScale * kk);
+      const double f = eta * cos_i - std::sqrt(std::max(kk, 0.0));
+      double ndx = eta * b.dx[k] + f * nx;
+      double ndy = eta * b.dy[k] + f * ny;
+      double ndz = eta * b.dz[k] + f * nz;
       if (kk < 0.0) {
-        b.alive[k] = false;  // total internal reflection
-        continue;
+        const double inv = 1.0 / std::sqrt(ndx * ndx + ndy * ndy + ndz * ndz);
+        ndx *= inv;
+        ndy *= inv;
+        ndz *= inv;
       }
-      const double f = eta * cos_i - std::sqrt(kk);
-      b.dx[k] = eta * b.dx[k] + f * nx;
-      b.dy[k] = eta * b.dy[k] + f * ny;
-      b.dz[k] = eta * b.dz[k] + f * nz;
+      b.dx[k] = ndx;
+      b.dy[k] = ndy;
+      b.dz[k] = ndz;
       b.t[k] *= (1.0f - refl);
     }
   }
@@ -227,6 +253,11 @@ void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& gr
 
 bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,
                        double guess_y, cv::Point2d* origin) {
+  return findStopRay(path, dir, 0.0, 0.0, guess_x, guess_y, origin);
+}
+
+bool findStopRay(const CompiledPath& path, const cv::Vec3d& dir, double target_u,
+                 double target_v, double guess_x, double guess_y, cv::Point2d* origin) {
   TracedRays r;
   r.resize(3);
   double x = guess_x, y = guess_y;
@@ -238,7 +269,8 @@ bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double gu
     // Aperture coordinates are recorded whether or not the ray reaches the sensor; a dead ray
     // before the stop keeps u = v = 0, so require a live centre ray.
     if (!r.alive[0] || !r.alive[1] || !r.alive[2]) return false;
-    const double u = r.u[0] * path.stop_semi_mm, v = r.v[0] * path.stop_semi_mm;
+    const double u = (r.u[0] - target_u) * path.stop_semi_mm;
+    const double v = (r.v[0] - target_v) * path.stop_semi_mm;
     if (std::hypot(u, v) < 1e-7) {
       *origin = {x, y};
       return true;

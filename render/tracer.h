@@ -2,8 +2,11 @@
 // Bundle tracing (Hullin 2011 §3.2, DESIGN "Bundle tracing"): a regular grid of parallel rays
 // from the plane of the first vertex (z = 0) is walked through a fixed sequence of surface events
 // (render/ghosts.h). Spheres are intersected on their vertex-side hemisphere, extended past their
-// rims, with negative ray parameters allowed; rays are dropped only when they miss a sphere,
-// meet total internal reflection at a refraction, or turn back before the sensor. Each ray keeps
+// rims, with negative ray parameters allowed. A ray that misses a sphere or meets total internal
+// reflection is not part of the ghost: it gets r_rel > 1 (so the rasterizer shows nothing there)
+// but goes on (from the vertex plane, or undeviated) so that the grid cells across those edges
+// are clipped by interpolation rather than lost whole; rays are dropped only when they cannot
+// reach the sensor. Each ray keeps
 // r_rel = max r / semi-aperture over the surfaces it meets, its aperture coordinates (u, v) at the
 // first stop crossing (stop semi-aperture = 1), its transmission and its sensor position.
 
@@ -89,5 +92,8 @@ void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& gr
 // Returns false when no such ray exists.
 bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,
                        double guess_y, cv::Point2d* origin);
+// The same for the ray through aperture coordinates (target_u, target_v) (stop semi-aperture = 1).
+bool findStopRay(const CompiledPath& path, const cv::Vec3d& dir, double target_u,
+                 double target_v, double guess_x, double guess_y, cv::Point2d* origin);
 
 }  // namespace flarekit::render
