@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <sstream>
 
@@ -35,8 +36,9 @@ std::string fmt(double v, const char* f = "%.4g") {
   return cv::format(f, v);
 }
 
-// A perceptually ordered dark-to-bright ramp (after matplotlib's "inferno" end points), t in [0, 1].
-cv::Vec3b ramp(double t) {
+}  // namespace
+
+cv::Vec3b severityRampColor(double t) {
   static const std::array<cv::Vec3b, 9> stops = {
       cv::Vec3b{0, 0, 4},     cv::Vec3b{31, 12, 72},  cv::Vec3b{85, 15, 109}, cv::Vec3b{136, 34, 106},
       cv::Vec3b{186, 54, 85}, cv::Vec3b{227, 89, 51}, cv::Vec3b{249, 140, 10}, cv::Vec3b{249, 201, 50},
@@ -48,6 +50,10 @@ cv::Vec3b ramp(double t) {
   for (int k = 0; k < 3; ++k) c[k] = static_cast<uchar>(std::lround(stops[i][k] * (1 - f) + stops[i + 1][k] * f));
   return c;
 }
+
+namespace {
+
+cv::Vec3b ramp(double t) { return severityRampColor(t); }
 
 std::string rgb(const cv::Vec3b& c) { return cv::format("rgb(%d,%d,%d)", c[0], c[1], c[2]); }
 
@@ -64,14 +70,17 @@ cv::Point2d polar(double cx, double cy, double rho, double roll_deg) {
   return {cx - rho * std::cos(p), cy + rho * std::sin(p)};
 }
 
-// Colour position of a value on the map's logarithmic scale (3 decades below the largest value).
-struct LogScale {
-  double top = 0;
-  double decades = 3;
+// Colour position of a map value: linear from no flare (0, or the best value when smaller is
+// worse) to the map's worst value.
+struct MapScale {
+  bool larger_worse = true;
+  double lo = 0, hi = 0;  // finite value range of the map
   double t(double v) const {
-    if (!(top > 0) || !(v > 0)) return -1;
-    return 1 + std::log10(v / top) / decades;
+    if (!std::isfinite(v)) return 0;
+    if (larger_worse) return hi > 0 ? v / hi : 0;
+    return hi > lo ? (hi - v) / (hi - lo) : 0;
   }
+  double valueAt(double t) const { return larger_worse ? t * hi : hi - t * (hi - lo); }
 };
 
 }  // namespace
@@ -112,20 +121,23 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
     << "\" viewBox=\"0 0 " << w << ' ' << h << "\" font-family=\"sans-serif\" font-size=\"11\">\n";
   o << "<title>Flare severity (" << toString(map.estimator) << ") over light directions</title>\n";
   o << "<circle cx=\"" << cx << "\" cy=\"" << cy << "\" r=\"" << radius << "\" fill=\"#111\"/>\n";
-  const bool larger_worse = largerIsWorse(map.estimator);
-  // Severity values for colour: the estimator, inverted where smaller means more flare.
-  auto severity = [&](double v) { return larger_worse ? v : (v > 0 ? 1.0 / v : 0.0); };
-  LogScale scale;
+  MapScale scale;
+  scale.larger_worse = largerIsWorse(map.estimator);
+  scale.lo = std::numeric_limits<double>::infinity();
+  scale.hi = -std::numeric_limits<double>::infinity();
   for (const auto& row : map.values)
-    for (double v : row) scale.top = std::max(scale.top, severity(v));
+    for (double v : row)
+      if (std::isfinite(v)) {
+        scale.lo = std::min(scale.lo, v);
+        scale.hi = std::max(scale.hi, v);
+      }
   const size_t n_a = map.angles_deg.size(), n_r = map.rolls_deg.size();
   const double da = n_a ? map.max_angle_deg / n_a : 0, dr = n_r ? 360.0 / n_r : 0;
   for (size_t i = 0; i < n_a; ++i) {
     const double r0 = radius * (map.angles_deg[i] - 0.5 * da) / map.max_angle_deg;
     const double r1 = radius * (map.angles_deg[i] + 0.5 * da) / map.max_angle_deg;
     for (size_t j = 0; j < n_r; ++j) {
-      const double t = scale.t(severity(map.values[i][j]));
-      if (t < 0) continue;  // no flare: the dark disc shows through
+      const double t = scale.t(map.values[i][j]);
       const double a = map.rolls_deg[j] - 0.5 * dr, b = map.rolls_deg[j] + 0.5 * dr;
       const cv::Point2d p1 = polar(cx, cy, r1, a), p2 = polar(cx, cy, r1, b), p3 = polar(cx, cy, r0, b),
                         p4 = polar(cx, cy, r0, a);
@@ -160,8 +172,9 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
     const cv::Point2d q = polar(cx, cy, rho, p.geometry.roll_deg);
     o << cv::format("<g class=\"light-marker\"><circle cx=\"%.1f\" cy=\"%.1f\" r=\"6\" fill=\"%s\" stroke=\"#0cf\" stroke-width=\"2\"/>",
                     q.x, q.y, p.ghost_count > 0 ? "#fff" : "none")
-      << cv::format("<text x=\"%.1f\" y=\"%.1f\" fill=\"#0cf\" stroke=\"#000\" stroke-width=\"0.3\" font-weight=\"bold\">",
-                    q.x + 8, q.y - 6)
+      << cv::format("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"%s\" fill=\"#0cf\" stroke=\"#000\" "
+                    "stroke-width=\"0.3\" font-weight=\"bold\">",
+                    q.x > cx ? q.x - 8 : q.x + 8, q.y - 8, q.x > cx ? "end" : "start")
       << p.rank << ". " << escape(p.name) << (inside ? "" : " (out of range)") << "</text></g>\n";
   }
   // Legend.
@@ -170,13 +183,11 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
   for (int k = 0; k <= 8; ++k) o << "<stop offset=\"" << k / 8.0 << "\" stop-color=\"" << rgb(ramp(k / 8.0)) << "\"/>";
   o << "</linearGradient></defs>\n";
   o << "<rect x=\"" << lx << "\" y=\"" << ly << "\" width=\"" << lw << "\" height=\"12\" fill=\"url(#severity-ramp)\"/>\n";
-  for (int k = 0; k <= 3; ++k) {
-    const double v = scale.top * std::pow(10.0, k - 3.0);
-    o << "<text x=\"" << lx + lw * k / 3.0 << "\" y=\"" << ly + 26 << "\" text-anchor=\"middle\">"
-      << fmt(larger_worse ? v : (v > 0 ? 1 / v : 0), "%.3g") << "</text>\n";
-  }
+  for (int k = 0; k <= 4; ++k)
+    o << "<text x=\"" << lx + lw * k / 4.0 << "\" y=\"" << ly + 26 << "\" text-anchor=\"middle\">"
+      << fmt(scale.valueAt(k / 4.0), "%.3g") << "</text>\n";
   o << "<text x=\"" << lx << "\" y=\"" << ly + 44 << "\">" << escape(toString(map.estimator))
-    << " of one light (B = " << fmt(map.brightness, "%.3g") << ") placed at each direction; dark: no ghosts</text>\n";
+    << " of one light (B = " << fmt(map.brightness, "%.3g") << ") placed at each direction; darkest: least flare</text>\n";
   o << "</svg>\n";
   return o.str();
 }
@@ -277,7 +288,7 @@ std::string reportHtml(const PredictionSummary& s, const model::FlareModel& m, c
   o << "<div class=\"row\"><div><h2>Severity over light directions</h2>\n" << polarMapSvg(s.map, s.lights)
     << "<p class=\"note\">Seen through the camera: the centre is the optical axis, the radius is θ up to the model's "
        "range, and a point's position is where a light there would appear. Ring colour: the "
-    << escape(toString(s.map.estimator)) << " of its flare over this scene (log scale).</p></div>\n";
+    << escape(toString(s.map.estimator)) << " of its flare over this scene.</p></div>\n";
   o << "<div><h2>Occurrence estimators of the whole overlay</h2>\n<table id=\"estimators\"><tr><th class=\"l\">estimator"
        "</th><th>value</th><th>percentile</th><th>range min</th><th>median</th><th>range max</th></tr>\n";
   for (const auto& r : s.ratings) {

@@ -14,6 +14,10 @@
 
 namespace flarekit::predict {
 
+// The severity map's colour scale, t in [0, 1] (dark to bright; after matplotlib's "inferno"),
+// as R, G, B.
+cv::Vec3b severityRampColor(double t);
+
 // RFC 4648 base64 of bytes.
 std::string base64(const std::vector<unsigned char>& bytes);
 
