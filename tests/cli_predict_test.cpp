@@ -148,6 +148,31 @@ TEST(CliPredict, ReportOpensOfflineInChromiumWithMapAndImages) {
   EXPECT_GT(map_pixels, 60000) << "the severity map is not visible in the screenshot";
 }
 
+TEST(CliPredict, GltfExampleMatchesTheJsonExample) {
+  // predict/examples/stage.gltf holds the same camera and lights as stage.json (the window as a
+  // point light of the same l·α): the same angles and brightness scales.
+  TempDir dir;
+  auto a = runFlarekit({"predict", kModel.string(), "--scene", kScene.string(), "--out", (dir / "json").string()});
+  auto b = runFlarekit({"predict", kModel.string(), "--scene", (kSource / "predict/examples/stage.gltf").string(),
+                        "--out", (dir / "gltf").string()});
+  ASSERT_EQ(a.exit_code, 0) << a.err;
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  const json ja = json::parse(readFile(dir / "json/estimators.json"));
+  const json jb = json::parse(readFile(dir / "gltf/estimators.json"));
+  ASSERT_EQ(ja["lights"].size(), jb["lights"].size());
+  for (size_t k = 0; k < ja["lights"].size(); ++k) {
+    const auto& la = ja["lights"][k];
+    const auto& lb = jb["lights"][k];
+    EXPECT_EQ(la["name"], lb["name"]);
+    EXPECT_EQ(la["status"], lb["status"]);
+    EXPECT_NEAR(la["angle_deg"].get<double>(), lb["angle_deg"].get<double>(), 1e-6) << la["name"];
+    EXPECT_NEAR(la["roll_deg"].get<double>(), lb["roll_deg"].get<double>(), 1e-6) << la["name"];
+    EXPECT_NEAR(la["brightness_scale"].get<double>() / lb["brightness_scale"].get<double>(), 1.0, 1e-5) << la["name"];
+  }
+  EXPECT_NEAR(ja["estimators"]["mean"].get<double>(), jb["estimators"]["mean"].get<double>(),
+              1e-5 * ja["estimators"]["mean"].get<double>());
+}
+
 TEST(CliPredict, BadScenesExitTwoWithOneLine) {
   TempDir dir;
   const json good = json::parse(readFile(kScene));
