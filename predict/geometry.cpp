@@ -1,5 +1,6 @@
 #include "predict/geometry.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -51,8 +52,12 @@ std::string toString(LightStatus status) {
 LightGeometry geometryFromCameraDirection(const Vec3& direction, const AngleRange& range,
                                           const SceneCamera& camera, cv::Size image_size) {
   LightGeometry g;
-  const double len = norm(direction);
-  const double x = direction[0] / len, y = direction[1] / len, z = direction[2] / len;
+  // Scale by the largest component first so huge coordinates cannot overflow the norm.
+  const double big = std::max({std::abs(direction[0]), std::abs(direction[1]), std::abs(direction[2])});
+  if (!std::isfinite(big) || !(big > 0)) throw InputError("a light direction must be finite and non-zero");
+  const Vec3 d{direction[0] / big, direction[1] / big, direction[2] / big};
+  const double len = norm(d);
+  const double x = d[0] / len, y = d[1] / len, z = d[2] / len;
   g.angle_deg = std::acos(std::clamp(z, -1.0, 1.0)) * kDeg;
   const double radial = std::hypot(x, y);
   // On the axis the roll is undefined; 0 is as good as any (the model is symmetric there).
@@ -93,7 +98,10 @@ LightGeometry lightGeometry(const SceneLight& light, const CameraPose& pose, con
   if (light.kind != LightKind::kDirectional)
     d = {light.position[0] - pose.position[0], light.position[1] - pose.position[1],
          light.position[2] - pose.position[2]};
-  if (!(norm(d) > 0)) throw InputError("light \"" + light.name + "\" sits at the camera's position");
+  if (!(std::max({std::abs(d[0]), std::abs(d[1]), std::abs(d[2])}) > 0))
+    throw InputError("light \"" + light.name + "\" sits at the camera's position");
+  if (!std::isfinite(d[0]) || !std::isfinite(d[1]) || !std::isfinite(d[2]))
+    throw InputError("light \"" + light.name + "\" is too far from the camera to compute its direction");
   return geometryFromCameraDirection(frame.cameraFromWorld(d), range, camera, image_size);
 }
 

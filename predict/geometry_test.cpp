@@ -157,6 +157,16 @@ TEST(LightGeometry, DirectionalLightsUseTheirDirection) {
   EXPECT_NEAR(g.roll_deg, 270, 1e-9);
 }
 
+TEST(LightGeometry, FarAwayLightsKeepFiniteAngles) {
+  const SceneCamera cam = defaultCamera();
+  auto g = lightGeometry(lightAt(-20, 0, 1e307), cam.pose, cam, kRange, kSize);
+  EXPECT_NEAR(g.angle_deg, 20, 1e-9);
+  EXPECT_NEAR(g.roll_deg, 0, 1e-9);
+  SceneLight same;
+  same.position = cam.pose.position;
+  EXPECT_THROW(lightGeometry(same, cam.pose, cam, kRange, kSize), InputError);
+}
+
 TEST(LightGeometry, AnglesRoundTrip) {
   for (double theta : {1.0, 7.5, 25.0, 60.0})
     for (double phi : {0.0, 33.0, 90.0, 181.0, 300.0}) {

@@ -116,8 +116,11 @@ AngleRange sampledRange(const model::FlareModel& m) {
 
 cv::Size predictionImageSize(const model::FlareModel& m, const Scene& scene, int width_px) {
   const int w = width_px > 0 ? width_px : m.capture.image_size.width;
-  const int h = std::max(1, static_cast<int>(std::lround(w * scene.camera.sensor_height_mm / scene.camera.sensor_width_mm)));
-  return {w, h};
+  const double h = std::round(w * scene.camera.sensor_height_mm / scene.camera.sensor_width_mm);
+  if (!(h <= 16384))
+    throw InputError(scene.file.string() + ": camera: the sensor's aspect ratio gives an image " +
+                     cv::format("%.0f", h) + " px high for " + std::to_string(w) + " px wide (at most 16384)");
+  return {w, std::max(1, static_cast<int>(h))};
 }
 
 cv::Mat sceneImage(const Scene& scene, cv::Size size) {

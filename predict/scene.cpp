@@ -170,6 +170,9 @@ Scene parseSceneJson(const std::string& text, const std::filesystem::path& file)
       CameraPose pose = readPose(p);
       pose.time_s = p["time_s"].number();
       if (!(pose.time_s > last)) p["time_s"].fail("times must increase along the path");
+      for (const SceneLight& light : s.lights)
+        if (norm(sub(light.position, pose.position)) == 0)
+          p["position"].fail("the camera passes through light \"" + light.name + "\"");
       last = pose.time_s;
       s.camera_path.push_back(pose);
     }
