@@ -115,14 +115,17 @@ struct PointEval {
   bool lower = false;
 };
 
+// The signed distance at model point q. The magnitude is exact when below `cutoff_inside`
+// (inside) or `cutoff_outside` (outside), else only known to be at least that.
 inline void evalDistance(const detail::PreparedShape& s, cv::Point2d q,
-                         const SignedDistanceOptions& o, PointEval& e) {
+                         const SignedDistanceOptions& o, PointEval& e, double cutoff_inside = 1e308,
+                         double cutoff_outside = 1e308) {
   e.rx = q.x - s.mx;
   e.lower = q.y > s.my;
   e.ry = -std::abs(q.y - s.my);
-  double d2 = 0;
-  detail::nearestUpper(s, e.rx, e.ry, o, e.segment, e.t, d2);
   e.inside = detail::insideRelative(s, e.rx, e.ry);
+  double d2 = 0;
+  detail::nearestUpper(s, e.rx, e.ry, o, e.segment, e.t, d2, e.inside ? cutoff_inside : cutoff_outside);
   const double d = std::sqrt(d2);
   e.d = e.inside ? -d : d;
   e.bx = s.seg[e.segment].x(e.t);
@@ -167,11 +170,39 @@ inline void distanceGradient(const GhostParameters& g, const detail::PreparedSha
   }
 }
 
-// Values (and, when jac != nullptr, the Jacobian row-major [channel][parameter]) of one ghost.
-inline void evalGhost(const GhostParameters& g, const detail::PreparedShape& s, cv::Point2d q,
-                      const SignedDistanceOptions& o, double* values, double* jac) {
-  PointEval e;
-  evalDistance(s, q, o, e);
+// The signed distance at model point q searching only the pieces of a block (certified, see
+// collectBlockPieces). The sign comes from the side of the tangent at the nearest point where
+// that point is a foot of the normal inside a segment (exact there: the outline is convex), else
+// from the exact inside test.
+inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::BlockPieces& b,
+                                cv::Point2d q, int newton_steps, detail::Candidate& hint,
+                                bool has_hint, PointEval& e) {
+  e.rx = q.x - s.mx;
+  e.lower = q.y > s.my;
+  e.ry = -std::abs(q.y - s.my);
+  const detail::Candidate c = detail::nearestInPieces(s, b, e.rx, e.ry, newton_steps, has_hint ? &hint : nullptr);
+  hint = c;
+  e.segment = c.segment;
+  e.t = c.t;
+  const detail::PowerCubic& seg = s.seg[c.segment];
+  e.bx = seg.x(c.t);
+  e.by = seg.y(c.t);
+  const double vx = e.rx - e.bx, vy = e.ry - e.by;
+  const double tx = seg.dx(c.t), ty = seg.dy(c.t);
+  const double cross = tx * vy - ty * vx;  // > 0 on the inner side (clockwise outline, y down)
+  const double v2 = vx * vx + vy * vy, t2 = tx * tx + ty * ty;
+  if (c.t > 0 && c.t < 1 && v2 > 1e-18 && cross * cross >= 0.98 * v2 * t2)
+    e.inside = cross > 0;
+  else
+    e.inside = detail::insideRelative(s, e.rx, e.ry);
+  const double d = std::sqrt(c.d2);
+  e.d = e.inside ? -d : d;
+}
+
+// Values (and, when jac != nullptr, the Jacobian row-major [channel][parameter]) of one ghost at
+// the point whose distance `e` holds.
+inline void shadeGhost(const GhostParameters& g, const detail::PreparedShape& s, const PointEval& e,
+                       double* values, double* jac) {
   const TransferWeights w = transferWeights(e.d, g, jac != nullptr);
   const int channels = g.channels;
   for (int c = 0; c < channels; ++c) values[c] = w.border * g.border[c] + w.inside * g.inside[c];
@@ -194,6 +225,15 @@ inline void evalGhost(const GhostParameters& g, const detail::PreparedShape& s, 
     row[w.is_inside ? layout.fi() : layout.fo()] = di_df;
     row[w.is_inside ? layout.ei() : layout.eo()] = di_de;
   }
+}
+
+// Values (and Jacobian) of one ghost at model point q with the full search.
+inline void evalGhost(const GhostParameters& g, const detail::PreparedShape& s, cv::Point2d q,
+                      const SignedDistanceOptions& o, double* values, double* jac) {
+  PointEval e;
+  // Beyond the fall-off ranges the transfer function is constant: the distance need not be exact.
+  evalDistance(s, q, o, e, g.inside_falloff, g.outside_falloff);
+  shadeGhost(g, s, e, values, jac);
 }
 
 void checkInputs(std::span<const GhostParameters> ghosts, int channels, const RenderOptions& options,
@@ -271,20 +311,37 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
           // Classify the block by the distance at its centre: d is 1-Lipschitz in model pixels,
           // and image pixels are 1/scale model pixels.
           int mode = 0;  // 0 per pixel, 1 constant inside (d ≤ −Fi), 2 nothing (d ≥ Fo)
+          cv::Point2d centre(bx + 0.5 * bw, by + 0.5 * bh);
+          PointEval ec;
+          detail::BlockPieces pieces;
+          pieces.certified = false;
+          const bool use_pieces = bw * bh > 1 && dopt.method == NearestPointMethod::kSampledNewton;
           if (bw * bh > 1) {
-            const cv::Point2d centre(bx + 0.5 * bw, by + 0.5 * bh);
             const cv::Point2d qc = identity ? centre : view.modelFromImage(centre);
-            PointEval e;
-            evalDistance(pg.shape, qc, dopt, e);
             const double reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
-            if (e.d + reach <= -g.inside_falloff) mode = 1;
-            else if (e.d - reach >= g.outside_falloff) mode = 2;
+            evalDistance(pg.shape, qc, dopt, ec, g.inside_falloff + reach, g.outside_falloff + reach);
+            if (ec.d + reach <= -g.inside_falloff) mode = 1;
+            else if (ec.d - reach >= g.outside_falloff) mode = 2;
+            // Below the cutoffs the centre's distance is exact: every pixel of the block is within
+            // |d| + reach of the outline, which bounds the pieces that can be nearest.
+            if (mode == 0 && use_pieces)
+              pieces = detail::collectBlockPieces(pg.shape, ec.rx, ec.ry, reach, std::abs(ec.d) + reach);
           }
           if (mode == 2) continue;
           for (int y = by; y < by + bh; ++y) {
             float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
+            detail::Candidate hint;
+            bool has_hint = false;
             for (int x = bx; x < bx + bw; ++x, out += channels) {
-              if (mode == 1) {
+              const cv::Point2d p(x + 0.5, y + 0.5);
+              int pixel_mode = mode;
+              if (mode == 0 && bw * bh > 1) {
+                // The same bounds per pixel, with its own distance from the centre.
+                const double r = std::sqrt((p.x - centre.x) * (p.x - centre.x) + (p.y - centre.y) * (p.y - centre.y)) * inv_scale;
+                if (ec.d + r <= -g.inside_falloff) pixel_mode = 1;
+                else if (ec.d - r >= g.outside_falloff) continue;
+              }
+              if (pixel_mode == 1) {
                 for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(g.inside[c]);
                 if (deriv) {
                   const ParameterLayout layout{channels};
@@ -293,9 +350,14 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 }
                 continue;
               }
-              const cv::Point2d p(x + 0.5, y + 0.5);
               const cv::Point2d q = identity ? p : view.modelFromImage(p);
-              evalGhost(g, pg.shape, q, dopt, values, deriv ? jac.data() : nullptr);
+              PointEval e;
+              if (pieces.certified) {
+                evalDistanceInBlock(pg.shape, pieces, q, dopt.newton_steps, hint, has_hint, e);
+                has_hint = true;
+              } else
+                evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
+              shadeGhost(g, pg.shape, e, values, deriv ? jac.data() : nullptr);
               for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(values[c]);
               if (deriv) {
                 const size_t offset = static_cast<size_t>(x - deriv->rect.x) * channels;

@@ -55,6 +55,20 @@ inline cv::Point2d tangentDirection(const PowerCubic& c, double t) {
   return len > 0 ? cv::Point2d(x / len, y / len) : cv::Point2d(0, 0);
 }
 
+// The smallest radius of curvature |B′|³/|B′ × B″| over [a, b], from 17 evaluations, times 0.9
+// for what lies between them (it varies slowly within a piece that turns by a few degrees).
+inline double curvatureRadius(const PowerCubic& c, double a, double b) {
+  double r = 1e308;
+  for (int i = 0; i <= 16; ++i) {
+    const double t = a + (b - a) * i / 16;
+    const double dx = c.dx(t), dy = c.dy(t);
+    const double cross = std::abs(dx * c.ddy(t) - dy * c.ddx(t));
+    const double speed = std::sqrt(dx * dx + dy * dy);
+    if (speed > 0 && cross > 0) r = std::min(r, speed * speed * speed / cross);
+  }
+  return 0.9 * r;
+}
+
 // Segments 0 (P_L→P_T) and 1 (P_T→P_R) relative to M, with their coarse samples: at least
 // `samples_per_segment` evenly spaced in t, then intervals halved until the outline turns by at
 // most `max_turn_deg` between neighbours (Bézier speed varies a lot on long thin shapes, and a
@@ -69,6 +83,11 @@ struct PreparedShape {
   std::array<std::array<double, kMaxSamples>, 2> tangent_x{}, tangent_y{};
   // Bounding box of the piece between samples k and k + 1 (box of its Bézier control points).
   std::array<std::array<double, kMaxSamples>, 2> box_x0{}, box_x1{}, box_y0{}, box_y1{};
+  // A lower estimate of the radius of curvature ρ over each piece. g(t) = |B(t) − p|²/2 has
+  // g″ = |B′|²(1 − D/ρ) at a stationary point at distance D on the concave side (else > 0), so
+  // two minima in a piece need a maximum between them with D ≥ ρ: while every point of the piece
+  // is closer to p than ρ, the piece holds at most one local minimum.
+  std::array<std::array<double, kMaxSamples>, 2> curvature_radius{};
 
   PreparedShape() = default;
   PreparedShape(const GhostParameters& g, int samples_per_segment, double max_turn_deg = 10) {
@@ -125,6 +144,7 @@ struct PreparedShape {
         box_x1[s][k] = std::max({xs[0], xs[1], xs[2], xs[3]});
         box_y0[s][k] = std::min({ys[0], ys[1], ys[2], ys[3]});
         box_y1[s][k] = std::max({ys[0], ys[1], ys[2], ys[3]});
+        curvature_radius[s][k] = curvatureRadius(seg[s], a, b);
       }
     }
   }
@@ -150,55 +170,122 @@ inline double refineNearest(const PowerCubic& c, double px, double py, double lo
     if (!(next >= lo && next <= hi)) next = 0.5 * (lo + hi);  // also catches NaN
     const double moved = std::abs(next - t);
     t = next;
-    if (moved < 1e-13) break;
+    if (moved < 1e-9) break;  // quadratic convergence: the error is now ~1e-18
   }
   const double bx = c.x(t) - px, by = c.y(t) - py;
   d2 = bx * bx + by * by;
   return t;
 }
 
-// The nearest point on one upper segment to the relative point (px, py): sets t and squared
-// distance. Coarse samples (shared/FITTING_NOTES.md: sampling then Newton is the robust choice),
-// then safeguarded Newton in every piece between two samples where the distance turns from
-// falling to rising (the sign of (B − p)·T changes, T the unit tangent) unless the piece's box is
-// already farther than the best point found. Every local minimum of the distance inside the
-// segment lies in such a piece, unless a piece holds several, which the turn-limited sampling
-// makes rare and harmless (their values differ by less than the piece's sagitta effects).
-inline void nearestOnSegmentNewton(const PreparedShape& s, int which, double px, double py,
-                                   int newton_steps, double& t_out, double& d2_out) {
-  const PowerCubic& c = s.seg[which];
-  const auto& sx = s.sample_x[which];
-  const auto& sy = s.sample_y[which];
-  const auto& tx = s.tangent_x[which];
-  const auto& ty = s.tangent_y[which];
-  const auto& st = s.sample_t[which];
-  const int n = s.samples[which];
-  std::array<double, kMaxSamples> slope;  // (S_k − p)·T_k: < 0 while the distance falls
-  t_out = 0;
-  d2_out = 1e308;
-  for (int k = 0; k < n; ++k) {
-    const double dx = sx[k] - px, dy = sy[k] - py;
-    const double d2 = dx * dx + dy * dy;
-    slope[k] = dx * tx[k] + dy * ty[k];
-    if (d2 < d2_out) {
-      d2_out = d2;
-      t_out = st[k];
-    }
-  }
-  for (int k = 0; k + 1 < n; ++k) {
-    if (!(slope[k] < 0 && slope[k + 1] > 0)) continue;
-    // Skip the piece when its box is already farther than the best point.
-    const double bx = std::max({s.box_x0[which][k] - px, 0.0, px - s.box_x1[which][k]});
-    const double by = std::max({s.box_y0[which][k] - py, 0.0, py - s.box_y1[which][k]});
-    if (bx * bx + by * by >= d2_out) continue;
-    const double start = -slope[k] < slope[k + 1] ? st[k] : st[k + 1];
+// Best point so far of a search.
+struct Candidate {
+  int segment = 0;
+  double t = 0;
+  double d2 = 1e308;
+};
+
+// Distances below this need no further search for a nearer point (pixels): a piece whose box is
+// at most this much nearer than the best point cannot improve it by more.
+inline constexpr double kDistanceTolerance = 1e-4;
+
+// Searches the piece [a, b] of segment `which` for a point nearer than `best`, given the piece's
+// box and a lower bound of its radius of curvature:
+//  - a piece whose box is farther than the best point (or than the cutoff) is skipped;
+//  - where the slope (B − p)·T turns from falling to rising between the ends, a safeguarded
+//    Newton finds the minimum inside;
+//  - the piece is done when it can hold no other minimum: every point of its box is closer to p
+//    than the radius of curvature (two minima need a maximum between them at a distance ≥ ρ,
+//    where g″ = |B′|²(1 − D/ρ) ≤ 0), or its box is within kDistanceTolerance of the best point;
+//  - otherwise it is split in four and searched again (depth ≤ 6).
+// The ends are the caller's candidates.
+inline void searchPiece(const PowerCubic& c, int which, double px, double py, double a, double b,
+                        double slope_a, double slope_b, double box_x0, double box_x1, double box_y0,
+                        double box_y1, double curvature_radius, int depth, int newton_steps,
+                        double cutoff2, Candidate& best, double hint = -1) {
+  const double gx = std::max({box_x0 - px, 0.0, px - box_x1});
+  const double gy = std::max({box_y0 - py, 0.0, py - box_y1});
+  const double lower2 = gx * gx + gy * gy;
+  if (lower2 >= std::min(best.d2, cutoff2)) return;
+  if (slope_a < 0 && slope_b > 0) {
     double d2 = 0;
-    const double t = refineNearest(c, px, py, st[k], st[k + 1], start, newton_steps, d2);
-    if (d2 < d2_out) {
-      d2_out = d2;
-      t_out = t;
+    const double start = (hint > a && hint < b) ? hint : (-slope_a < slope_b ? a : b);
+    const double t = refineNearest(c, px, py, a, b, start, newton_steps, d2);
+    if (d2 < best.d2) best = {which, t, d2};
+  }
+  const double fx = std::max(std::abs(box_x0 - px), std::abs(box_x1 - px));
+  const double fy = std::max(std::abs(box_y0 - py), std::abs(box_y1 - py));
+  if (fx * fx + fy * fy < curvature_radius * curvature_radius) return;  // at most one minimum
+  if (std::sqrt(lower2) >= std::sqrt(std::min(best.d2, cutoff2)) - kDistanceTolerance) return;
+  if (depth >= 6) return;
+  // Split in four: samples, slopes (B′ is non-zero inside a segment), boxes.
+  constexpr int kParts = 4;
+  double ts[kParts + 1], slopes[kParts + 1];
+  for (int i = 0; i <= kParts; ++i) {
+    ts[i] = a + (b - a) * i / kParts;
+    if (i == 0) {
+      slopes[i] = slope_a;
+    } else if (i == kParts) {
+      slopes[i] = slope_b;
+    } else {
+      const double t = ts[i];
+      const double bx = c.x(t) - px, by = c.y(t) - py;
+      const double d2 = bx * bx + by * by;
+      if (d2 < best.d2) best = {which, t, d2};
+      const cv::Point2d dir = tangentDirection(c, t);
+      slopes[i] = bx * dir.x + by * dir.y;
     }
   }
+  for (int i = 0; i < kParts; ++i) {
+    const double u = ts[i], v = ts[i + 1], third = (v - u) / 3;
+    const double xs[4] = {c.x(u), c.x(u) + third * c.dx(u), c.x(v) - third * c.dx(v), c.x(v)};
+    const double ys[4] = {c.y(u), c.y(u) + third * c.dy(u), c.y(v) - third * c.dy(v), c.y(v)};
+    searchPiece(c, which, px, py, u, v, slopes[i], slopes[i + 1],
+                std::min({xs[0], xs[1], xs[2], xs[3]}), std::max({xs[0], xs[1], xs[2], xs[3]}),
+                std::min({ys[0], ys[1], ys[2], ys[3]}), std::max({ys[0], ys[1], ys[2], ys[3]}),
+                curvature_radius, depth + 1, newton_steps, cutoff2, best);
+  }
+}
+
+// The nearest point of the upper segments 0 and 1 to the relative point (px, py). Coarse samples
+// (shared/FITTING_NOTES.md: sampling then Newton is the robust choice), then every piece between
+// two samples that could hold a nearer point (by its box) is searched (searchPiece), so no basin
+// of the distance hides between samples, even deep inside long thin shapes. The segment holding
+// the best sample is searched first, so its result prunes the other.
+//
+// With a finite `cutoff` the search only guarantees the exact distance when it is below the
+// cutoff; otherwise the result is a point at least `cutoff` away (what a renderer needs where the
+// transfer function has saturated).
+inline Candidate nearestUpperNewton(const PreparedShape& s, double px, double py, int newton_steps,
+                                    double cutoff) {
+  const double cutoff2 = cutoff < 1e150 ? cutoff * cutoff : 1e308;
+  std::array<std::array<double, kMaxSamples>, 2> d2s, slopes;
+  Candidate best;
+  for (int w = 0; w < 2; ++w) {
+    const int n = s.samples[w];
+    const double* sx = s.sample_x[w].data();
+    const double* sy = s.sample_y[w].data();
+    const double* tx = s.tangent_x[w].data();
+    const double* ty = s.tangent_y[w].data();
+    double* d2 = d2s[w].data();
+    double* slope = slopes[w].data();
+    for (int k = 0; k < n; ++k) {  // vectorizable
+      const double dx = sx[k] - px, dy = sy[k] - py;
+      d2[k] = dx * dx + dy * dy;
+      slope[k] = dx * tx[k] + dy * ty[k];  // < 0 while the distance falls
+    }
+    for (int k = 0; k < n; ++k)
+      if (d2[k] < best.d2) best = {w, s.sample_t[w][k], d2[k]};
+  }
+  const int first = best.segment;
+  for (int w : {first, 1 - first}) {
+    const int n = s.samples[w];
+    const auto& st = s.sample_t[w];
+    for (int k = 0; k + 1 < n; ++k)
+      searchPiece(s.seg[w], w, px, py, st[k], st[k + 1], slopes[w][k], slopes[w][k + 1],
+                  s.box_x0[w][k], s.box_x1[w][k], s.box_y0[w][k], s.box_y1[w][k],
+                  s.curvature_radius[w][k], 0, newton_steps, cutoff2, best);
+  }
+  return best;
 }
 
 // The paper's "binary search, 12 iterations" (Walch 2018 §3.2), read as bisection on the sign of
@@ -225,6 +312,69 @@ inline void nearestOnSegmentBisection(const PreparedShape& s, int which, double 
       t_out = t;
     }
   }
+}
+
+// The pieces that can hold the nearest point of any point within `reach` of the (reflected,
+// relative) point (cx, cy), given that every such point is within `upper` of the outline: the
+// renderer finds them once per block of pixels and searches only them per pixel. `certified`
+// is false when there are too many of them for the list (then the caller uses the full search).
+struct BlockPieces {
+  static constexpr int kMax = 24;
+  int count = 0;
+  bool certified = true;
+  std::array<unsigned char, kMax> segment{}, piece{};
+};
+
+inline BlockPieces collectBlockPieces(const PreparedShape& s, double cx, double cy, double reach,
+                                      double upper) {
+  BlockPieces out;
+  const double limit = upper + reach;  // box distance from the centre below which a piece counts
+  for (int w = 0; w < 2; ++w)
+    for (int k = 0; k + 1 < s.samples[w]; ++k) {
+      const double x0 = s.box_x0[w][k], x1 = s.box_x1[w][k], y0 = s.box_y0[w][k], y1 = s.box_y1[w][k];
+      const double gx = std::max({x0 - cx, 0.0, cx - x1}), gy = std::max({y0 - cy, 0.0, cy - y1});
+      if (gx * gx + gy * gy > limit * limit) continue;
+      if (out.count == BlockPieces::kMax) {
+        out.certified = false;
+        return out;
+      }
+      out.segment[out.count] = static_cast<unsigned char>(w);
+      out.piece[out.count] = static_cast<unsigned char>(k);
+      ++out.count;
+    }
+  return out;
+}
+
+// The nearest point to (px, py) among the block's pieces, searched with searchPiece (the same
+// search as nearestUpperNewton restricted to the pieces that can matter). `hint` (the previous
+// pixel's nearest point) gives a first upper bound, so most pieces are dismissed by their box
+// alone, and starts Newton in its piece.
+inline Candidate nearestInPieces(const PreparedShape& s, const BlockPieces& b, double px, double py,
+                                 int newton_steps, const Candidate* hint) {
+  Candidate best;
+  if (hint) {
+    const PowerCubic& c = s.seg[hint->segment];
+    const double dx = c.x(hint->t) - px, dy = c.y(hint->t) - py;
+    best = {hint->segment, hint->t, dx * dx + dy * dy};
+  }
+  for (int i = 0; i < b.count; ++i) {
+    const int w = b.segment[i], k = b.piece[i];
+    const double gx = std::max({s.box_x0[w][k] - px, 0.0, px - s.box_x1[w][k]});
+    const double gy = std::max({s.box_y0[w][k] - py, 0.0, py - s.box_y1[w][k]});
+    if (gx * gx + gy * gy >= best.d2) continue;
+    double slope[2];
+    for (int e = 0; e < 2; ++e) {
+      const double dx = s.sample_x[w][k + e] - px, dy = s.sample_y[w][k + e] - py;
+      const double d2 = dx * dx + dy * dy;
+      slope[e] = dx * s.tangent_x[w][k + e] + dy * s.tangent_y[w][k + e];
+      if (d2 < best.d2) best = {w, s.sample_t[w][k + e], d2};
+    }
+    searchPiece(s.seg[w], w, px, py, s.sample_t[w][k], s.sample_t[w][k + 1], slope[0], slope[1],
+                s.box_x0[w][k], s.box_x1[w][k], s.box_y0[w][k], s.box_y1[w][k],
+                s.curvature_radius[w][k], 0, newton_steps, 1e308, best,
+                hint && hint->segment == w ? hint->t : -1.0);
+  }
+  return best;
 }
 
 // Exact inside test on the relative, reflected point (x, y ≤ 0): pick the quarter by x, solve
@@ -254,16 +404,20 @@ inline bool insideRelative(const PreparedShape& s, double x, double y) {
 }
 
 // The full search on the reflected relative point; returns the upper segment (0 or 1), t and d².
+// `cutoff` as in nearestOnSegmentNewton (kSampledNewton only).
 inline void nearestUpper(const PreparedShape& s, double px, double py,
-                         const SignedDistanceOptions& o, int& segment, double& t, double& d2) {
-  double t0 = 0, d20 = 0, t1 = 0, d21 = 0;
-  if (o.method == NearestPointMethod::kBisection12) {
-    nearestOnSegmentBisection(s, 0, px, py, o.bisection_steps, t0, d20);
-    nearestOnSegmentBisection(s, 1, px, py, o.bisection_steps, t1, d21);
-  } else {
-    nearestOnSegmentNewton(s, 0, px, py, o.newton_steps, t0, d20);
-    nearestOnSegmentNewton(s, 1, px, py, o.newton_steps, t1, d21);
+                         const SignedDistanceOptions& o, int& segment, double& t, double& d2,
+                         double cutoff = 1e308) {
+  if (o.method == NearestPointMethod::kSampledNewton) {
+    const Candidate c = nearestUpperNewton(s, px, py, o.newton_steps, cutoff);
+    segment = c.segment;
+    t = c.t;
+    d2 = c.d2;
+    return;
   }
+  double t0 = 0, d20 = 0, t1 = 0, d21 = 0;
+  nearestOnSegmentBisection(s, 0, px, py, o.bisection_steps, t0, d20);
+  nearestOnSegmentBisection(s, 1, px, py, o.bisection_steps, t1, d21);
   if (d20 <= d21) {
     segment = 0;
     t = t0;
