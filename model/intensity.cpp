@@ -17,16 +17,18 @@ TransferWeights transferWeights(double d, const GhostParameters& g, bool with_de
   const double a = std::abs(d);
   const bool saturated = a >= falloff;
   const double tau = saturated ? 1.0 : a / falloff;
-  const double power = saturated ? 1.0 : (tau > 0 ? std::pow(tau, exponent) : 0.0);  // τ^E
+  const double log_tau = tau > 0 ? std::log(tau) : 0.0;
+  const double power = saturated ? 1.0 : (tau > 0 ? std::exp(exponent * log_tau) : 0.0);  // τ^E
   w.border = 1 - power;
   w.inside = inside ? power : 0.0;
   if (!with_derivatives || saturated) return w;
   // ∂τ^E/∂τ = E·τ^(E−1), finite at τ = 0 by evaluating at max(τ, 1e-9) (the outline is a
   // non-smooth point of the model anyway).
-  const double dpower_dtau = exponent * std::pow(std::max(tau, 1e-9), exponent - 1);
+  const double dpower_dtau =
+      tau > 1e-9 ? exponent * power / tau : exponent * std::pow(1e-9, exponent - 1);
   const double dtau_dd = (inside ? -1.0 : 1.0) / falloff;
   const double dtau_dfalloff = -tau / falloff;
-  const double dpower_dexponent = tau > 0 ? power * std::log(tau) : 0.0;
+  const double dpower_dexponent = tau > 0 ? power * log_tau : 0.0;
   const double dpower_dd = dpower_dtau * dtau_dd;
   const double dpower_dfalloff = dpower_dtau * dtau_dfalloff;
   w.border_d_distance = -dpower_dd;

@@ -198,13 +198,22 @@ inline constexpr double kDistanceTolerance = 1e-4;
 //    where g″ = |B′|²(1 − D/ρ) ≤ 0), or its box is within kDistanceTolerance of the best point;
 //  - otherwise it is split in four and searched again (depth ≤ 6).
 // The ends are the caller's candidates.
+[[gnu::noinline]] inline void splitPiece(const PowerCubic& c, int which, double px, double py,
+                                         double a, double b, double slope_a, double slope_b,
+                                         double curvature_radius, int depth, int newton_steps,
+                                         double cutoff2, Candidate& best);
+
+inline double boxGap2(double px, double py, double x0, double x1, double y0, double y1) {
+  const double gx = std::max(std::max(x0 - px, px - x1), 0.0);
+  const double gy = std::max(std::max(y0 - py, py - y1), 0.0);
+  return gx * gx + gy * gy;
+}
+
 inline void searchPiece(const PowerCubic& c, int which, double px, double py, double a, double b,
                         double slope_a, double slope_b, double box_x0, double box_x1, double box_y0,
                         double box_y1, double curvature_radius, int depth, int newton_steps,
                         double cutoff2, Candidate& best, double hint = -1) {
-  const double gx = std::max({box_x0 - px, 0.0, px - box_x1});
-  const double gy = std::max({box_y0 - py, 0.0, py - box_y1});
-  const double lower2 = gx * gx + gy * gy;
+  const double lower2 = boxGap2(px, py, box_x0, box_x1, box_y0, box_y1);
   if (lower2 >= std::min(best.d2, cutoff2)) return;
   if (slope_a < 0 && slope_b > 0) {
     double d2 = 0;
@@ -217,7 +226,16 @@ inline void searchPiece(const PowerCubic& c, int which, double px, double py, do
   if (fx * fx + fy * fy < curvature_radius * curvature_radius) return;  // at most one minimum
   if (std::sqrt(lower2) >= std::sqrt(std::min(best.d2, cutoff2)) - kDistanceTolerance) return;
   if (depth >= 6) return;
-  // Split in four: samples, slopes (B′ is non-zero inside a segment), boxes.
+  splitPiece(c, which, px, py, a, b, slope_a, slope_b, curvature_radius, depth, newton_steps,
+             cutoff2, best);
+}
+
+// Splits a piece in four (samples, slopes, boxes) and searches the parts (rarely needed, so kept
+// out of line).
+[[gnu::noinline]] inline void splitPiece(const PowerCubic& c, int which, double px, double py,
+                                         double a, double b, double slope_a, double slope_b,
+                                         double curvature_radius, int depth, int newton_steps,
+                                         double cutoff2, Candidate& best) {
   constexpr int kParts = 4;
   double ts[kParts + 1], slopes[kParts + 1];
   for (int i = 0; i <= kParts; ++i) {
@@ -359,9 +377,8 @@ inline Candidate nearestInPieces(const PreparedShape& s, const BlockPieces& b, d
   }
   for (int i = 0; i < b.count; ++i) {
     const int w = b.segment[i], k = b.piece[i];
-    const double gx = std::max({s.box_x0[w][k] - px, 0.0, px - s.box_x1[w][k]});
-    const double gy = std::max({s.box_y0[w][k] - py, 0.0, py - s.box_y1[w][k]});
-    if (gx * gx + gy * gy >= best.d2) continue;
+    if (boxGap2(px, py, s.box_x0[w][k], s.box_x1[w][k], s.box_y0[w][k], s.box_y1[w][k]) >= best.d2)
+      continue;
     double slope[2];
     for (int e = 0; e < 2; ++e) {
       const double dx = s.sample_x[w][k + e] - px, dy = s.sample_y[w][k + e] - py;
