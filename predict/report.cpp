@@ -55,6 +55,14 @@ namespace {
 
 cv::Vec3b ramp(double t) { return severityRampColor(t); }
 
+// Names on the map are cut to keep labels on the page (the tooltip has the whole name).
+std::string shortName(const std::string& name) {
+  if (name.size() <= 16) return name;
+  size_t cut = 15;
+  while (cut > 0 && (static_cast<unsigned char>(name[cut]) & 0xC0) == 0x80) --cut;  // UTF-8 boundary
+  return name.substr(0, cut) + "…";
+}
+
 std::string rgb(const cv::Vec3b& c) { return cv::format("rgb(%d,%d,%d)", c[0], c[1], c[2]); }
 
 std::string pngDataUri(const cv::Mat& linear) {
@@ -113,8 +121,9 @@ std::string base64(const std::vector<unsigned char>& bytes) {
 }
 
 std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPrediction>& lights, int width_px) {
+  // Room beside the disc for the labels of lights beyond the model's range (drawn on the rim).
   const double w = width_px, legend_h = 70;
-  const double radius = 0.5 * w - 40, cx = 0.5 * w, cy = radius + 30;
+  const double radius = 0.5 * w - 130, cx = 0.5 * w, cy = radius + 30;
   const double h = cy + radius + 30 + legend_h;
   std::ostringstream o;
   o << "<svg xmlns=\"http://www.w3.org/2000/svg\" id=\"severity-map\" width=\"" << w << "\" height=\"" << h
@@ -174,8 +183,11 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
                     q.x, q.y, p.ghost_count > 0 ? "#fff" : "none")
       << cv::format("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"%s\" fill=\"#0cf\" stroke=\"#000\" "
                     "stroke-width=\"0.3\" font-weight=\"bold\">",
-                    q.x > cx ? q.x - 8 : q.x + 8, q.y - 8, q.x > cx ? "end" : "start")
-      << p.rank << ". " << escape(p.name) << (inside ? "" : " (out of range)") << "</text></g>\n";
+                    // Inside the disc labels point inwards, on the rim outwards, so they stay on the page.
+                    (q.x > cx) == inside ? q.x - 8 : q.x + 8, q.y - 8, (q.x > cx) == inside ? "end" : "start")
+      << p.rank << ". " << escape(shortName(p.name)) << "<title>" << escape(p.name) << ": θ "
+      << fmt(p.geometry.angle_deg, "%.1f") << "°, φ " << fmt(p.geometry.roll_deg, "%.0f") << "°, "
+      << toString(p.geometry.status) << "</title></text></g>\n";
   }
   // Legend.
   const double ly = cy + radius + 40, lx = 40, lw = w - 80;
@@ -187,7 +199,8 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
     o << "<text x=\"" << lx + lw * k / 4.0 << "\" y=\"" << ly + 26 << "\" text-anchor=\"middle\">"
       << fmt(scale.valueAt(k / 4.0), "%.3g") << "</text>\n";
   o << "<text x=\"" << lx << "\" y=\"" << ly + 44 << "\">" << escape(toString(map.estimator))
-    << " of one light (B = " << fmt(map.brightness, "%.3g") << ") placed at each direction; darkest: least flare</text>\n";
+    << " of one light (B = " << fmt(map.brightness, "%.3g")
+    << ") placed at each direction; darkest: least flare; hollow marks: lights without ghosts</text>\n";
   o << "</svg>\n";
   return o.str();
 }

@@ -25,7 +25,7 @@ std::string base64(const std::vector<unsigned char>& bytes);
 // centre as the flare convention has it, counter-clockwise as displayed), a colour scale, and the
 // lights (in range and out of range) marked by name. `width_px` is the SVG's width.
 std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPrediction>& lights,
-                        int width_px = 460);
+                        int width_px = 640);
 
 // The timeline as an SVG line plot of severity over time (empty string for no points).
 std::string timelineSvg(const std::vector<TimelinePoint>& timeline, Estimator estimator,
