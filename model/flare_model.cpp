@@ -125,7 +125,11 @@ GhostTrack parseGhost(const ConfigNode& node, int channels) {
   }
   std::string key;
   const std::string problem = trackProblem(g, channels, &key);
-  if (!problem.empty()) node.fail(key + ": " + problem);
+  if (!problem.empty()) {
+    if (key.rfind("parameters.", 0) == 0) node["parameters"][key.substr(11)].fail(problem);
+    if (node.has(key)) node[key].fail(problem);
+    node.fail(key + ": " + problem);
+  }
   return g;
 }
 

@@ -198,7 +198,7 @@ inline constexpr double kDistanceTolerance = 1e-4;
 //    where g″ = |B′|²(1 − D/ρ) ≤ 0), or its box is within kDistanceTolerance of the best point;
 //  - otherwise it is split in four and searched again (depth ≤ 6).
 // The ends are the caller's candidates.
-[[gnu::noinline]] inline void splitPiece(const PowerCubic& c, int which, double px, double py,
+inline void splitPiece(const PowerCubic& c, int which, double px, double py,
                                          double a, double b, double slope_a, double slope_b,
                                          double curvature_radius, int depth, int newton_steps,
                                          double cutoff2, Candidate& best);
@@ -232,7 +232,7 @@ inline void searchPiece(const PowerCubic& c, int which, double px, double py, do
 
 // Splits a piece in four (samples, slopes, boxes) and searches the parts (rarely needed, so kept
 // out of line).
-[[gnu::noinline]] inline void splitPiece(const PowerCubic& c, int which, double px, double py,
+inline void splitPiece(const PowerCubic& c, int which, double px, double py,
                                          double a, double b, double slope_a, double slope_b,
                                          double curvature_radius, int depth, int newton_steps,
                                          double cutoff2, Candidate& best) {
