@@ -68,6 +68,12 @@ Estimators computeEstimators(const cv::Mat& overlay, double scene_level,
 // gives NaN.
 double percentile(const std::vector<double>& distribution, double x);
 
+// Spearman's rank correlation of two equally long samples (ties get their mean rank): how well two
+// severity rankings agree, e.g. the model's against the physical renderer's for the same lights.
+// Throws std::invalid_argument for different lengths or fewer than 2 values; NaN when a sample is
+// constant.
+double spearmanCorrelation(const std::vector<double>& a, const std::vector<double>& b);
+
 nlohmann::json toJson(const Estimators& e);
 
 }  // namespace flarekit::predict

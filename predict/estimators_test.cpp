@@ -86,5 +86,19 @@ TEST(Percentile, MidRankOfHandCountedCases) {
   EXPECT_TRUE(std::isnan(percentile({}, 1)));
 }
 
+TEST(Spearman, HandComputedRankCorrelations) {
+  // Same order: 1; reversed: −1.
+  EXPECT_DOUBLE_EQ(spearmanCorrelation({1, 2, 3, 4}, {10, 20, 30, 400}), 1.0);
+  EXPECT_DOUBLE_EQ(spearmanCorrelation({1, 2, 3, 4}, {4, 3, 2, 1}), -1.0);
+  // Ranks (1 2 3 4 5) against (2 1 4 3 5): Σd² = 4, ρ = 1 − 6·4 / (5·24) = 0.8.
+  EXPECT_NEAR(spearmanCorrelation({1, 2, 3, 4, 5}, {0.2, 0.1, 0.4, 0.3, 0.5}), 0.8, 1e-12);
+  // Ties take the mean rank: (1, 2.5, 2.5, 4) against (1 2 3 4), Pearson of the ranks:
+  // deviations (−1.5, 0, 0, 1.5) and (−1.5, −0.5, 0.5, 1.5): Σ = 4.5, √(4.5 · 5) = √22.5.
+  EXPECT_NEAR(spearmanCorrelation({1, 5, 5, 9}, {1, 2, 3, 4}), 4.5 / std::sqrt(22.5), 1e-12);
+  EXPECT_TRUE(std::isnan(spearmanCorrelation({1, 1, 1}, {1, 2, 3})));
+  EXPECT_THROW(spearmanCorrelation({1}, {1}), std::invalid_argument);
+  EXPECT_THROW(spearmanCorrelation({1, 2}, {1, 2, 3}), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace flarekit::predict
