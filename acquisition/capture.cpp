@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "acquisition/dng_writer.h"
 #include "acquisition/simulated_camera.h"
 #include "common/atomic_file.h"
 #include "common/config.h"
@@ -343,12 +344,24 @@ void Session::captureFrame(int index, double angle_deg) {
     fs::create_directories(out_ / "raw");
     Json raws = Json::array();
     for (size_t k = 0; k < bracket.size(); ++k) {
-      const std::string file = "raw/" + name + "_e" + std::to_string(k) + ".png";
-      writeFileAtomically(out_ / file, [&](const fs::path& tmp) {
-        if (!cv::imwrite(tmp.string(), bracket[k].data))
-          throw RuntimeError(tmp.string() + ": cannot write the RAW frame");
-      });
-      raws.push_back({{"file", file}, {"exposure_s", bracket[k].exposure_s}});
+      // Bayer frames as DNG (black/white levels and EXIF exposure travel with them, and
+      // `flarekit merge` reads them back); mono frames as 16-bit PNG (LibRaw 0.20 cannot read
+      // monochrome DNGs), their levels and exposure in the manifest.
+      const bool dng = bracket[k].cfa != Cfa::kMono;
+      const std::string file =
+          "raw/" + name + "_e" + std::to_string(k) + (dng ? ".dng" : ".png");
+      if (dng) {
+        writeDng(out_ / file, bracket[k], bracket[k].camera);
+      } else {
+        writeFileAtomically(out_ / file, [&](const fs::path& tmp) {
+          if (!cv::imwrite(tmp.string(), bracket[k].data))
+            throw RuntimeError(tmp.string() + ": cannot write the RAW frame");
+        });
+      }
+      raws.push_back({{"file", file},
+                      {"exposure_s", bracket[k].exposure_s},
+                      {"black_level_dn", bracket[k].black_level},
+                      {"white_level_dn", bracket[k].white_level}});
     }
     entry["raw_files"] = raws;
   }

@@ -7,7 +7,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "acquisition/testing_dng.h"
+#include "acquisition/dng_writer.h"
 #include "common/testing.h"
 
 namespace flarekit::acquisition {
@@ -23,11 +23,15 @@ cv::Mat pattern(int rows, int cols) {
 TEST(RawDecode, ReadsBayerDngWithLevelsAndExif) {
   testing::TempDir dir;
   cv::Mat raw = pattern(48, 64);
-  testing::DngSpec spec;
+  RawFrame spec;
+  spec.data = raw;
+  spec.cfa = Cfa::kRGGB;
+  spec.black_level = 256;
+  spec.white_level = 16383;
   spec.exposure_s = 0.25;
   spec.iso = 200;
   spec.f_number = 5.6;
-  testing::writeDng(dir / "a.dng", raw, spec);
+  writeDng(dir / "a.dng", spec, "FlareKit Test Camera");
   RawFrame f = decodeRawFile(dir / "a.dng");
   ASSERT_EQ(f.data.size(), raw.size());
   EXPECT_EQ(f.cfa, Cfa::kRGGB);
@@ -37,6 +41,13 @@ TEST(RawDecode, ReadsBayerDngWithLevelsAndExif) {
   EXPECT_NEAR(f.iso, 200, 1e-6);
   EXPECT_NEAR(f.f_number, 5.6, 1e-3);
   EXPECT_EQ(cv::norm(f.data, raw, cv::NORM_INF), 0.0);
+  EXPECT_NE(f.camera.find("FlareKit Test Camera"), std::string::npos) << f.camera;
+  // Other Bayer layouts round-trip too.
+  spec.cfa = Cfa::kGBRG;
+  writeDng(dir / "b.dng", spec);
+  EXPECT_EQ(decodeRawFile(dir / "b.dng").cfa, Cfa::kGBRG);
+  spec.cfa = Cfa::kMono;
+  EXPECT_THROW(writeDng(dir / "m.dng", spec), InputError);
 }
 
 TEST(RawDecode, NotARawFileIsAnInputErrorNamingTheFile) {

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 #include <numeric>
@@ -46,6 +48,25 @@ void installInterruptHandler() {
   sigaction(SIGTERM, &sa, nullptr);
 }
 
+// "0.25,1,4" → {0.25, 1, 4}; InputError naming the option on anything else.
+std::vector<double> parseTimes(const std::string& text, const std::string& what) {
+  std::vector<double> out;
+  if (text.empty()) return out;
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t comma = text.find(',', start);
+    const std::string item = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    char* end = nullptr;
+    const double v = std::strtod(item.c_str(), &end);
+    if (item.empty() || *end != '\0' || !(v > 0) || !std::isfinite(v))
+      throw InputError(what + ": \"" + item + "\" is not a positive number of seconds (expected e.g. 0.25,1,4)");
+    out.push_back(v);
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  return out;
+}
+
 void registerRigCheck(CLI::App& app) {
   auto rig_arg = std::make_shared<std::string>();
   auto* cmd = app.add_subcommand(
@@ -65,6 +86,7 @@ void registerMerge(CLI::App& app) {
   struct Options {
     std::string out;
     std::vector<std::string> inputs;
+    std::string exposures_text;
     std::vector<double> exposures;
     std::vector<std::string> darks;
     double black = 0, white = 65535;
@@ -79,10 +101,9 @@ void registerMerge(CLI::App& app) {
                "(with --exposures) into one HDR OpenEXR with a `saturated` mask");
   cmd->add_option("--out", o->out, "Output .exr file")->required();
   cmd->add_option("INPUT", o->inputs, "Bracketed frames of one scene")->required();
-  cmd->add_option("--exposures", o->exposures,
-                  "Exposure times in seconds, one per input (required for TIFF/PNG; overrides "
-                  "EXIF for RAW)")
-      ->delimiter(',');
+  cmd->add_option("--exposures", o->exposures_text,
+                  "Exposure times in seconds, one per input, e.g. 0.25,1,4 (required for "
+                  "TIFF/PNG; overrides EXIF for RAW)");
   cmd->add_option("--dark", o->darks, "Dark frames, one per input, same exposures (optional)");
   cmd->add_option("--black", o->black, "Black level of TIFF/PNG inputs in DN (default 0)");
   cmd->add_option("--white", o->white, "White level of TIFF/PNG inputs in DN (default 65535)");
@@ -93,6 +114,7 @@ void registerMerge(CLI::App& app) {
   cmd->add_option("--read-noise-e", o->read_noise_e, "Read noise in electrons RMS");
   cmd->add_option("--iso", o->iso, "ISO the frames were taken at (for the rig's gain)");
   cmd->callback([o] {
+    o->exposures = parseTimes(o->exposures_text, "merge: --exposures");
     if (o->inputs.size() < 1) throw InputError("merge: give at least one input frame");
     if (!o->exposures.empty() && o->exposures.size() != o->inputs.size())
       throw InputError("merge: --exposures lists " + std::to_string(o->exposures.size()) +
@@ -157,7 +179,7 @@ void registerCapture(CLI::App& app) {
     std::string rig = "sim-heliar";
     std::string out;
     double from = 0, to = 0, step = 0;
-    std::vector<double> exposures;
+    std::string exposures_text;
     int dark_frames = -1;
     bool keep_raw = false, resume = false, no_truth = false;
   };
@@ -170,7 +192,7 @@ void registerCapture(CLI::App& app) {
   cmd->add_option("--from", o->from, "First angle in degrees (default: the rig's)");
   cmd->add_option("--to", o->to, "Last angle in degrees (default: the rig's)");
   cmd->add_option("--step", o->step, "Angle step in degrees (default: the rig's)");
-  cmd->add_option("--exposures", o->exposures, "Bracket in seconds, e.g. 0.25,1,4")->delimiter(',');
+  cmd->add_option("--exposures", o->exposures_text, "Bracket in seconds, e.g. 0.25,1,4");
   cmd->add_option("--dark-frames", o->dark_frames, "Dark frames averaged per exposure");
   cmd->add_flag("--keep-raw", o->keep_raw, "Also keep the RAW exposures (raw/*.png)");
   cmd->add_flag("--resume", o->resume, "Continue the capture in --out where it stopped");
@@ -181,7 +203,8 @@ void registerCapture(CLI::App& app) {
     if (cmd->count("--from")) plan.from_deg = o->from;
     if (cmd->count("--to")) plan.to_deg = o->to;
     if (cmd->count("--step")) plan.step_deg = o->step;
-    if (!o->exposures.empty()) plan.exposures_s = o->exposures;
+    if (!o->exposures_text.empty())
+      plan.exposures_s = parseTimes(o->exposures_text, "capture: --exposures");
     if (o->dark_frames >= 0) plan.dark_frames = o->dark_frames;
     plan.keep_raw = o->keep_raw;
     std::string error;
