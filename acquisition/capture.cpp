@@ -367,21 +367,20 @@ void Session::captureFrame(int index, double angle_deg) {
   }
   if (sim_camera_ && options_.write_truth) {
     ExrImage truth = sim_camera_->scene().truth(angle_deg, sim_camera_->fNumber());
-    ExrImage main, ghosts;
-    main.attributes = truth.attributes;
-    ghosts.attributes = truth.attributes;
-    for (auto& layer : truth.layers) (layer.name.empty() ? main : ghosts).layers.push_back(layer);
-    main.attributes["flarekit.angle_deg"] = angle_deg;
-    ghosts.attributes["flarekit.angle_deg"] = angle_deg;
-    fs::create_directories(out_ / "truth");
-    writeExr(out_ / ("truth/" + name + ".exr"), main);
-    entry["truth_file"] = "truth/" + name + ".exr";
-    if (!ghosts.layers.empty()) {
-      ExrWriteOptions half;
-      half.pixel_type = ExrPixelType::kHalf;
-      writeExr(out_ / ("truth/" + name + ".ghosts.exr"), ghosts, half);
-      entry["ghosts_file"] = "truth/" + name + ".ghosts.exr";
+    truth.attributes["flarekit.angle_deg"] = angle_deg;
+    // Half precision (3 significant digits, far below the frames' noise) keeps truth/ small;
+    // float when a value would overflow half (the light's own image of a bright scene).
+    double peak = 0;
+    for (const auto& layer : truth.layers) {
+      double lo, hi;
+      cv::minMaxLoc(layer.image.reshape(1), &lo, &hi);
+      peak = std::max({peak, std::abs(lo), std::abs(hi)});
     }
+    ExrWriteOptions write;
+    write.pixel_type = peak < 60000 ? ExrPixelType::kHalf : ExrPixelType::kFloat;
+    fs::create_directories(out_ / "truth");
+    writeExr(out_ / ("truth/" + name + ".exr"), truth, write);
+    entry["truth_file"] = "truth/" + name + ".exr";
   }
   // The frame last: the manifest lists a frame only after all its files are whole.
   writeExr(out_ / ("frames/" + name + ".exr"), mergedToExr(merged, meta));

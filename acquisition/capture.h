@@ -14,16 +14,20 @@
 //                                  flarekit.camera, flarekit.lens, flarekit.rig,
 //                                  flarekit.pixel_pitch_um, flarekit.units, flarekit.cfa
 //   DIR/truth/frame_NNNN.exr     simulated rigs only: the renderer's noise-free radiance in the
-//                                  frames' units and channels (float32, main layer)
-//   DIR/truth/frame_NNNN.ghosts.exr  simulated rigs only: one layer per rendered ghost,
-//                                  "ghost.<id>.Y" (or .R/.G/.B), same units, half precision;
-//                                  attributes flarekit.ghost.<id>.surfaces/.centroid_px/...
+//                                  frames' units and channels (main layer "Y" or "R","G","B")
+//                                  and one layer per rendered ghost, "ghost.<id>.Y" (or
+//                                  .R/.G/.B), same units; half precision (float when a value
+//                                  exceeds 60000), zip; attributes flarekit.angle_deg and
+//                                  flarekit.ghost.<id>.surfaces/.centroid_px/.bbox_px/.energy
 //   DIR/darks/dark_K.exr         averaged dark frame for exposure K (float DN), --dark-frames
-//   DIR/raw/frame_NNNN_eK.png    --keep-raw: the RAW exposures as 16-bit PNG (photosite values)
+//   DIR/raw/frame_NNNN_eK.dng    --keep-raw: the RAW exposures; DNG for Bayer sensors (levels and
+//                                  EXIF exposure inside), 16-bit PNG (.png) for mono sensors
 //
 // ── manifest.json (format "flarekit.capture", version 1) ─────────────────────────────────────
 //   status            "in_progress" | "complete" | "interrupted" (Ctrl-C) | "failed" (+ "error")
-//   rig               {name, file, head, camera, simulated: bool}
+//   rig               {name, file (as given on the command line), head, camera: driver names,
+//                      simulated: bool}
+//   head              description of the rotation head
 //   lens              {name, file}        ("" when the rig does not know its lens)
 //   camera            {description, iso, f_number, exposures_s: [...], cfa, black_level_dn,
 //                      white_level_dn, gain_e_per_dn, read_noise_e}
@@ -34,9 +38,12 @@
 //   plan              {from_deg, to_deg, step_deg, angles_deg: [...], exposures_s: [...],
 //                      dark_frames, keep_raw}
 //   truth             true when truth/ holds ground truth for every frame
-//   frames            [{index, angle_deg, file, truth_file?, ghosts_file?, raw_files?,
-//                       exposures_s, saturated_photosites, exposure_ratios: [measured...],
-//                       attempts}] in plan order, one entry per finished frame, never twice
+//   frames            [{index, angle_deg, file, truth_file?,
+//                       raw_files?: [{file, exposure_s, black_level_dn, white_level_dn}],
+//                       exposures_s, saturated_photosites,
+//                       exposure_ratios: [measured long/short ratio of consecutive exposures;
+//                                         0 = too few mid-tone photosites to tell],
+//                       retries}] in plan order, one entry per finished frame, never twice
 //   darks             [{exposure_s, file, frames}] when dark frames were taken
 //   frames_done, frames_planned
 // A frame file is written before the manifest lists it: a frame listed is whole and readable;
