@@ -37,8 +37,9 @@ fs::path temporaryNameFor(const fs::path& path) {
   std::string tag;
   for (int i = 0; i < 6; ++i) tag += kAlphabet[rng() % (sizeof(kAlphabet) - 1)];
   // ".<stem>.tmp-XXXXXX<ext>": hidden, and keeps the extension for format-by-extension writers.
-  return path.parent_path() /
-         ("." + path.stem().string() + ".tmp-" + tag + path.extension().string());
+  std::string name = ".";
+  name.append(path.stem().string()).append(".tmp-").append(tag).append(path.extension().string());
+  return path.parent_path() / name;
 }
 
 }  // namespace
