@@ -30,8 +30,9 @@ struct PredictOptions {
   // scene's sensor aspect ratio.
   int image_width_px = 0;
   // l_F·α_F of Eq. 2: the illuminance the capture's light gave at the camera, lux (> 0). The model
-  // file does not record it; the default is the rig light of shared/HARDWARE.md seen at the rig
-  // distance (a fibre source of ~1e6 cd/m² filling ~1e-5 sr).
+  // file does not record it, so set it to the capture light's measured value; the default, 10 lx,
+  // is only a placeholder of the right order for a fibre-optic source (~1e6 cd/m²) seen under
+  // ~1e-5 sr on the rig. Every B scales with 1 / this value.
   double capture_illuminance_lux = 10.0;
   // The estimator shown in the severity map and timeline and used to rank lights.
   Estimator severity_estimator = Estimator::kMean;
