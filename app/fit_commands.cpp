@@ -1,8 +1,114 @@
-// flarekit fit, flarekit fit-eval, flarekit bench fit.
+// flarekit fit, flarekit fit-eval, flarekit bench fit: parse options, call fit/.
+#include <iostream>
+#include <memory>
+
+#include <nlohmann/json.hpp>
+#include <tbb/global_control.h>
+
 #include "app/commands.h"
+#include "common/error.h"
+#include "common/log.h"
+#include "fit/fit_capture.h"
+#include "fit/frames.h"
 
 namespace flarekit::app {
+namespace {
 
-void registerFitCommands(CLI::App& /*app*/) {}
+namespace fs = std::filesystem;
+
+struct StackArgs {
+  std::vector<std::string> inputs;
+  std::string angles_csv, angle_pattern, layer;
+  std::string camera, lens, light;
+  double f_number = 0, iso = 0, exposure_s = 0, pixel_pitch_um = 0;
+};
+
+void addStackOptions(CLI::App* cmd, StackArgs& a) {
+  cmd->add_option("--angles-csv", a.angles_csv, "EXR stacks: CSV \"file,angle_deg\" with each frame's angle");
+  cmd->add_option("--angle-pattern", a.angle_pattern,
+                  "EXR stacks: regular expression whose first group in the file name is the angle, e.g. 'theta_([-0-9.]+)'");
+  cmd->add_option("--layer", a.layer, "Layer holding the image (default: the main layer Y or R,G,B)");
+  cmd->add_option("--camera", a.camera, "EXR stacks: camera model for the model file");
+  cmd->add_option("--lens", a.lens, "EXR stacks: lens name for the model file");
+  cmd->add_option("--light", a.light, "EXR stacks: light source for the model file");
+  cmd->add_option("--f-number", a.f_number, "EXR stacks: f-number (else from attributes, else 1)");
+  cmd->add_option("--iso", a.iso, "EXR stacks: ISO (else from attributes, else 100)");
+  cmd->add_option("--exposure-s", a.exposure_s, "EXR stacks: exposure time in s (else from attributes, else 1)");
+  cmd->add_option("--pixel-pitch-um", a.pixel_pitch_um, "EXR stacks: pixel pitch in µm (else from attributes, else 1)");
+}
+
+fit::FrameStack loadStack(const StackArgs& a) {
+  fit::FrameLoadOptions o;
+  o.angles_csv = a.angles_csv;
+  o.angle_pattern = a.angle_pattern;
+  o.layer = a.layer;
+  o.info.camera = a.camera;
+  o.info.lens = a.lens;
+  o.info.light = a.light;
+  o.info.f_number = a.f_number;
+  o.info.iso = a.iso;
+  o.info.exposure_s = a.exposure_s;
+  o.info.pixel_pitch_um = a.pixel_pitch_um;
+  std::string error;
+  if (!o.IsValid(&error)) throw InputError(error);
+  std::vector<fs::path> inputs(a.inputs.begin(), a.inputs.end());
+  return fit::loadFrames(inputs, o);
+}
+
+void registerFit(CLI::App& app) {
+  struct Options {
+    StackArgs stack;
+    std::string out, optimizer = "ceres", degree = "2", holdout, report;
+    int threads = 2;
+    double edge_weight = -1;
+  };
+  auto o = std::make_shared<Options>();
+  auto* cmd = app.add_subcommand(
+      "fit", "Fit a model of every ghost to a capture (Walch et al. 2018 §3.3): detection, tracking, "
+             "per-frame fits, polynomials per parameter; writes model.json");
+  cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder (manifest.json), or EXR files / folders")
+      ->required();
+  cmd->add_option("--out", o->out, "Model file to write (model.json)")->required();
+  cmd->add_option("--optimizer", o->optimizer, "ceres (Levenberg–Marquardt, default) or walch-gd (the paper's gradient descent)");
+  cmd->add_option("--degree", o->degree, "Polynomial degree per parameter, or auto (1–4 by held-out error); default 2");
+  cmd->add_option("--holdout", o->holdout, "odd: fit on every other frame only (evaluate the others with fit-eval --frames odd)");
+  cmd->add_option("--report", o->report, "Folder for per-ghost tracks, residuals and contact sheets");
+  cmd->add_option("--threads", o->threads, "Threads (default 2)");
+  cmd->add_option("--edge-weight", o->edge_weight, "λ, the edge term's weight (default 1)");
+  addStackOptions(cmd, o->stack);
+  cmd->callback([o] {
+    fit::FitOptions options;
+    options.solver.optimizer = fit::parseOptimizer(o->optimizer);
+    if (o->degree == "auto") {
+      options.auto_degree = true;
+    } else {
+      try {
+        size_t used = 0;
+        options.degree = std::stoi(o->degree, &used);
+        if (used != o->degree.size()) throw std::invalid_argument("");
+      } catch (const std::exception&) {
+        throw InputError("--degree: expected a number or auto, got \"" + o->degree + "\"");
+      }
+    }
+    if (!o->holdout.empty() && o->holdout != "odd") throw InputError("--holdout: only \"odd\" is supported");
+    options.holdout_odd = o->holdout == "odd";
+    options.threads = o->threads;
+    if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
+    std::string error;
+    if (!options.IsValid(&error)) throw InputError(error);
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, options.threads);
+    fit::FrameStack stack = loadStack(o->stack);
+    fit::FitResult result = fit::fitCapture(stack, options);
+    result.model.save(o->out);
+    logInfo(result.summary.BriefReport());
+    logInfo("Model written to " + o->out);
+  });
+}
+
+}  // namespace
+
+void registerFitCommands(CLI::App& app) {
+  registerFit(app);
+}
 
 }  // namespace flarekit::app

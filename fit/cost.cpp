@@ -72,8 +72,10 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
   return 1.4826 * values[values.size() / 2];
 }
 
-FrameData FrameData::make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge) {
+FrameData FrameData::make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge,
+                          int factor) {
   FrameData d;
+  d.factor = factor;
   d.image = image;
   d.valid = valid;
   d.channels = image.channels();
@@ -83,6 +85,27 @@ FrameData FrameData::make(const cv::Mat& image, const cv::Mat& valid, const Edge
   cv::erode(valid, d.edge_valid, kernel, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(255));
   d.noise_sigma = estimateNoiseSigma(image, valid);
   return d;
+}
+
+FramePyramid::FramePyramid(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge)
+    : image_(image), valid_(valid), edge_(edge) {}
+
+const FrameData& FramePyramid::level(int factor) const {
+  factor = std::max(1, factor);
+  auto it = levels_.find(factor);
+  if (it != levels_.end()) return it->second;
+  if (factor == 1) return levels_[1] = FrameData::make(image_, valid_, edge_, 1);
+  const cv::Size size(std::max(1, image_.cols / factor), std::max(1, image_.rows / factor));
+  const cv::Rect crop(0, 0, size.width * factor, size.height * factor);
+  cv::Mat image, valid;
+  cv::resize(image_(crop), image, size, 0, 0, cv::INTER_AREA);
+  // A coarse pixel is valid only when all its k×k pixels are.
+  cv::Mat invalid = valid_(crop) == 0, any_invalid;
+  cv::Mat invalid_f;
+  invalid.convertTo(invalid_f, CV_32F, 1.0 / 255);
+  cv::resize(invalid_f, any_invalid, size, 0, 0, cv::INTER_AREA);
+  valid = any_invalid <= 0;
+  return levels_[factor] = FrameData::make(image, valid, edge_, factor);
 }
 
 // ── Bounds ────────────────────────────────────────────────────────────────────────────────────
@@ -106,10 +129,35 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
 
 // ── Group cost ────────────────────────────────────────────────────────────────────────────────
 
-GroupCost::GroupCost(const FrameData& frame, const EdgeFilter& edge, const cv::Mat& others,
+namespace {
+
+// The level at which a region of `area` capture pixels fits within max_pixels.
+int levelFor(double area, int max_pixels) {
+  return std::max(1, static_cast<int>(std::ceil(std::sqrt(area / max_pixels))));
+}
+
+const FrameData& chooseLevel(const FramePyramid& pyramid,
+                             std::span<const model::GhostParameters> seeds,
+                             const CostOptions& options) {
+  const cv::Rect image_rect(0, 0, pyramid.size().width, pyramid.size().height);
+  cv::Rect box;
+  for (const auto& g : seeds) box |= model::ghostPixelBounds(g);
+  const int m = static_cast<int>(std::ceil(options.region_margin_px));
+  const cv::Rect region = cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & image_rect;
+  return pyramid.level(levelFor(region.area(), options.max_pixels));
+}
+
+}  // namespace
+
+GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
+                     std::span<const model::GhostParameters> others,
                      std::span<const model::GhostParameters> seeds, const CostOptions& options)
-    : frame_(frame), edge_(edge), options_(options) {
+    : frame_(chooseLevel(pyramid, seeds, options)), edge_(edge), options_(options) {
   if (seeds.empty()) throw std::invalid_argument("GroupCost needs at least one ghost");
+  const FrameData& frame = frame_;
+  image_size_ = pyramid.size();
+  const double k = frame.factor;
+  if (frame.factor > 1) view_.scale = 1.0 / k;  // model (capture) pixels → level pixels
   ghost_count_ = static_cast<int>(seeds.size());
   channels_ = frame.channels;
   parameters_per_ghost_ = model::parameterCount(channels_);
@@ -117,9 +165,9 @@ GroupCost::GroupCost(const FrameData& frame, const EdgeFilter& edge, const cv::M
   cv::Rect box;
   for (const auto& g : seeds) {
     if (g.channels != channels_) throw std::invalid_argument("ghost channels differ from the frame's");
-    box |= model::ghostPixelBounds(g);
+    box |= model::ghostPixelBounds(g, view_);
   }
-  const int m = static_cast<int>(std::ceil(options.region_margin_px));
+  const int m = static_cast<int>(std::ceil(options.region_margin_px / k));
   region_ = cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & image_rect;
   const int r = edge.radius();
   grown_ = cv::Rect(region_.x - r, region_.y - r, region_.width + 2 * r, region_.height + 2 * r);
@@ -128,11 +176,12 @@ GroupCost::GroupCost(const FrameData& frame, const EdgeFilter& edge, const cv::M
   target_ = frame.image(region_).clone();
   target_edge_ = frame.edge(region_).clone();
   if (!others.empty()) {
-    target_ -= others(region_);
-    const cv::Rect window = grown_ & image_rect;
-    cv::Mat others_edge = edge.apply(others(window));
-    target_edge_ -= others_edge(cv::Rect(region_.x - window.x, region_.y - window.y,
-                                         region_.width, region_.height));
+    // The other ghosts over the grown region, so their edge image is exact on the region.
+    model::RenderOptions render;
+    cv::Mat o = model::renderGhosts(others, grown_, channels_, render, view_);
+    const cv::Rect inner(region_.x - grown_.x, region_.y - grown_.y, region_.width, region_.height);
+    target_ -= o(inner);
+    target_edge_ -= edge.apply(o)(inner);
   }
   data_valid_ = frame.valid(region_);
   edge_valid_ = frame.edge_valid(region_);
@@ -158,8 +207,7 @@ GroupCost::GroupCost(const FrameData& frame, const EdgeFilter& edge, const cv::M
   }
   scale_ = std::max({scale, 3 * frame.noise_sigma, 1e-12});
 
-  const int stride = std::max(
-      1, static_cast<int>(std::ceil(std::sqrt(double(region_.area()) / options.max_pixels))));
+  const int stride = levelFor(region_.area(), options.max_pixels);
   for (int y = stride / 2; y < region_.height; y += stride) {
     const uchar* v = data_valid_.ptr<uchar>(y);
     for (int x = stride / 2; x < region_.width; x += stride)
@@ -195,9 +243,9 @@ double GroupCost::evaluate(std::span<const model::GhostParameters> input, bool j
   render.parallel = true;
   model::RenderedGhosts rendered;
   if (jacobians)
-    rendered = model::renderGhostsWithDerivatives(ghosts, grown_, channels_, render);
+    rendered = model::renderGhostsWithDerivatives(ghosts, grown_, channels_, render, view_);
   else
-    rendered.image = model::renderGhosts(ghosts, grown_, channels_, render);
+    rendered.image = model::renderGhosts(ghosts, grown_, channels_, render, view_);
   model_ = rendered.image(inner).clone();
   cv::Mat model_edge = edge_.apply(rendered.image)(inner);
   cv::subtract(model_, target_, residual_data_);

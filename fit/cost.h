@@ -28,12 +28,18 @@
 //
 // The region: the union of the fitted ghosts' pixel bounds (model/model_renderer.h
 // ghostPixelBounds), grown by region_margin_px and clipped to the image. Regions larger than
-// max_pixels are sampled on a regular stride (every pixel still enters through the filters).
+// max_pixels are fitted on a coarser level of the frame (k×k pixel averages, k the smallest
+// integer that brings the region within max_pixels): the model is rendered there through a
+// ViewTransform of scale 1/k (parameters stay in capture pixels), which keeps the cost of a
+// frame-filling ghost near that of a small one. Model images are point samples at each coarse
+// pixel's centre, the frame's are area averages: for the smooth fall-offs of ghosts the two agree
+// and an edge's position is unbiased by symmetry.
 //
 // Derivatives: the model is linear in nothing but Ib, Ii, yet every parameter's derivative image
 // is analytic (model/'s renderer, envelope theorem at the fixed nearest point); E is linear, so
 // the Jacobian of r_edge is E applied to those images.
 
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -71,16 +77,33 @@ class EdgeFilter {
   int radius_;
 };
 
-// What the cost needs from one frame, computed once per frame.
+// What the cost needs from one frame at one level, computed once per frame and level.
 struct FrameData {
   cv::Mat image;       // X: CV_32FC(channels), non-finite set to 0
-  cv::Mat valid;       // CV_8U 255 = finite and not saturated
+  cv::Mat valid;       // CV_8U 255 = finite and not saturated (at a coarse level: all k×k were)
   cv::Mat edge;        // E∗X
   cv::Mat edge_valid;  // CV_8U: valid, eroded by the filter radius
   double noise_sigma = 0;  // robust noise estimate of the background (luminance), same units
   int channels = 1;
+  int factor = 1;      // k: one pixel here is k×k capture pixels
 
-  static FrameData make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge);
+  static FrameData make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge,
+                        int factor = 1);
+};
+
+// A frame at every level a cost asks for (built on demand; not thread-safe).
+class FramePyramid {
+ public:
+  FramePyramid(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge);
+  // The frame averaged over k×k blocks (k = 1: the frame itself). Sizes round down.
+  const FrameData& level(int factor) const;
+  const FrameData& full() const { return level(1); }
+  cv::Size size() const { return image_.size(); }
+
+ private:
+  cv::Mat image_, valid_;
+  const EdgeFilter& edge_;
+  mutable std::map<int, FrameData> levels_;
 };
 
 // Robust noise σ of an image: 1.4826 × the median absolute deviation of the luminance of its
@@ -92,19 +115,24 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 // residual blocks read it concurrently only after evaluate() returned.
 class GroupCost {
  public:
-  // `others`: a full-frame image of the ghosts modelled outside this group (may be empty), which
-  // is subtracted from X. `seeds` fix the region and the number of ghosts.
-  GroupCost(const FrameData& frame, const EdgeFilter& edge, const cv::Mat& others,
+  // `others`: the ghosts modelled outside this group (fixed), subtracted from X. `seeds` fix the
+  // region, its level and the number of ghosts.
+  GroupCost(const FramePyramid& frame, const EdgeFilter& edge,
+            std::span<const model::GhostParameters> others,
             std::span<const model::GhostParameters> seeds, const CostOptions& options);
 
   int ghostCount() const { return ghost_count_; }
   int parametersPerGhost() const { return parameters_per_ghost_; }
   int channels() const { return channels_; }
+  // The region in the level's pixels, and the level (k: capture pixels per level pixel).
   cv::Rect region() const { return region_; }
+  int factor() const { return frame_.factor; }
+  const model::ViewTransform& view() const { return view_; }
   double scale() const { return scale_; }
   double lossScale() const { return options_.loss_scale; }
-  cv::Size imageSize() const { return frame_.image.size(); }
-  // Sampled pixels, region coordinates.
+  // The capture's size (full resolution).
+  cv::Size imageSize() const { return image_size_; }
+  // Sampled pixels, region coordinates (level pixels).
   const std::vector<cv::Point>& samples() const { return samples_; }
   // Residuals per sample: 2·channels (data then edge per channel).
   int residualsPerSample() const { return 2 * channels_; }
@@ -136,6 +164,8 @@ class GroupCost {
  private:
   const FrameData& frame_;
   const EdgeFilter& edge_;
+  cv::Size image_size_;
+  model::ViewTransform view_;
   CostOptions options_;
   int ghost_count_ = 0, parameters_per_ghost_ = 0, channels_ = 1;
   cv::Rect region_;        // in the image

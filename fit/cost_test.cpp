@@ -77,12 +77,12 @@ TEST(GroupCost, AnalyticJacobianMatchesGradientChecker) {
   CostOptions options;
   options.loss_scale = 0;
   EdgeFilter edge(options);
-  FrameData data = FrameData::make(frame, valid, edge);
+  FramePyramid data(frame, valid, edge);
   // Evaluate away from the truth so that residuals are not zero, and with no pixel centre exactly
   // on a kink of the model (e.g. at Mx + R + Fo, where the derivative is one-sided).
   std::vector<GhostParameters> at = {ghost(45.3, 35.2, 17, 23.5, 14.2, 0.9, 0.45),
                                      ghost(61.2, 38.7, 14.6, 12.45, 13.4, 0.55, 0.6)};
-  GroupCost cost(data, edge, cv::Mat(), at, options);
+  GroupCost cost(data, edge, {}, at, options);
   auto function = makeGroupCostFunction(cost);
   ceres::NumericDiffOptions numeric;
   // Small steps: the fall-off ends (d = −Fi, d = Fo) are kinks, and a larger step averages across
@@ -133,7 +133,7 @@ RoundTrip roundTrip(Optimizer optimizer, int channels, int gd_iterations = 400) 
   cv::Mat valid(size, CV_8U, cv::Scalar(255));
   CostOptions options;
   EdgeFilter edge(options);
-  FrameData data = FrameData::make(frame, valid, edge);
+  FramePyramid data(frame, valid, edge);
   std::vector<GhostParameters> seeds = truth;
   seeds[0].center_x += 2.5;
   seeds[0].left *= 0.85;
@@ -146,7 +146,7 @@ RoundTrip roundTrip(Optimizer optimizer, int channels, int gd_iterations = 400) 
       s.border[c] *= 0.7;
       s.inside[c] *= 1.3;
     }
-  GroupCost cost(data, edge, cv::Mat(), seeds, options);
+  GroupCost cost(data, edge, {}, seeds, options);
   SolverOptions solver;
   solver.optimizer = optimizer;
   solver.gd_max_iterations = gd_iterations;
@@ -198,11 +198,11 @@ TEST(SolveGroup, IgnoresSaturatedPixels) {
   valid(cv::Rect(25, 30, 12, 20)).setTo(0);
   CostOptions options;
   EdgeFilter edge(options);
-  FrameData data = FrameData::make(frame, valid, edge);
+  FramePyramid data(frame, valid, edge);
   std::vector<GhostParameters> seeds = truth;
   seeds[0].center_x += 2;
   seeds[0].left += 3;
-  GroupCost cost(data, edge, cv::Mat(), seeds, options);
+  GroupCost cost(data, edge, {}, seeds, options);
   auto r = solveGroup(cost, seeds, SolverOptions{});
   EXPECT_NEAR(r.ghosts[0].center_x, 50, 0.1);
   EXPECT_NEAR(r.ghosts[0].left, 20, 0.2);

@@ -1,0 +1,177 @@
+#include "fit/detection.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <opencv2/imgproc.hpp>
+
+namespace flarekit::fit {
+
+bool DetectionOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (!(smoothing_px > 0)) return fail("smoothing_px must be > 0");
+  if (levels_sigma.empty()) return fail("levels_sigma must not be empty");
+  for (double l : levels_sigma)
+    if (!(l > 0)) return fail("levels_sigma must be > 0");
+  if (min_area_px < 1) return fail("min_area_px must be ≥ 1");
+  if (!(max_axis_offset > 0)) return fail("max_axis_offset must be > 0");
+  if (!(light_zone_sigma > 0)) return fail("light_zone_sigma must be > 0");
+  if (!(zone_margin >= 1)) return fail("zone_margin must be ≥ 1");
+  if (max_new_per_frame < 1) return fail("max_new_per_frame must be ≥ 1");
+  return true;
+}
+
+LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double noise_sigma,
+                     const DetectionOptions& options) {
+  LightImage light;
+  cv::Mat saturated = valid == 0;
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(saturated, labels, stats, centroids, 8, CV_32S);
+  int best = -1, best_area = 0;
+  for (int i = 1; i < n; ++i)
+    if (stats.at<int>(i, cv::CC_STAT_AREA) > best_area) {
+      best_area = stats.at<int>(i, cv::CC_STAT_AREA);
+      best = i;
+    }
+  if (best < 0) return light;  // no clipped core: the light is outside the frame
+  light.found = true;
+  light.center = {centroids.at<double>(best, 0) + 0.5, centroids.at<double>(best, 1) + 0.5};
+  const double core = std::sqrt(best_area / std::numbers::pi);
+  // The zone: where the azimuthal median (robust to ghosts crossing a few directions) falls to
+  // the frame's median plus light_zone_sigma noise σ. The halo and starburst are point-symmetric
+  // about the light; ghosts are not, so the median follows the former.
+  std::vector<float> all;
+  for (int y = 0; y < luminance.rows; y += 4)
+    for (int x = 0; x < luminance.cols; x += 4) all.push_back(luminance.at<float>(y, x));
+  std::nth_element(all.begin(), all.begin() + all.size() / 2, all.end());
+  const double floor_level = all[all.size() / 2] + options.light_zone_sigma * noise_sigma;
+  const double max_r = std::hypot(luminance.cols, luminance.rows);
+  double zone = core;
+  std::vector<float> ring;
+  for (double r = core + 1; r < max_r; r += 2) {
+    ring.clear();
+    const int samples = 72;
+    for (int k = 0; k < samples; ++k) {
+      const double a = 2 * std::numbers::pi * k / samples;
+      const int x = static_cast<int>(light.center.x + r * std::cos(a));
+      const int y = static_cast<int>(light.center.y + r * std::sin(a));
+      if (x < 0 || y < 0 || x >= luminance.cols || y >= luminance.rows) continue;
+      ring.push_back(valid.at<uchar>(y, x) ? luminance.at<float>(y, x) : 1e30f);
+    }
+    if (ring.size() < 8) break;
+    std::nth_element(ring.begin(), ring.begin() + ring.size() / 2, ring.end());
+    zone = r;
+    if (ring[ring.size() / 2] < floor_level) break;
+  }
+  light.zone_radius_px = zone * options.zone_margin;
+  return light;
+}
+
+std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& valid,
+                                    double noise_sigma, const LightImage& light,
+                                    const DetectionOptions& options) {
+  cv::Mat smooth;
+  cv::GaussianBlur(residual, smooth, cv::Size(0, 0), options.smoothing_px, options.smoothing_px,
+                   cv::BORDER_REPLICATE);
+  const int W = residual.cols, H = residual.rows;
+  // Keep out of the light's zone and of masked pixels.
+  cv::Mat allowed = valid.clone();
+  if (light.found)
+    cv::circle(allowed, cv::Point(cvRound(light.center.x), cvRound(light.center.y)),
+               cvRound(light.zone_radius_px), cv::Scalar(0), cv::FILLED);
+  // The axis: through the light and the image centre (horizontal for a pan rig without roll).
+  const cv::Point2d center(W / 2.0, H / 2.0);
+  cv::Point2d dir(1, 0);
+  if (light.found && cv::norm(light.center - center) > 0.05 * W) {
+    dir = light.center - center;
+    dir /= cv::norm(dir);
+  }
+  auto axisOffset = [&](cv::Point2d p) {
+    const cv::Point2d d = p - center;
+    return std::abs(d.x * dir.y - d.y * dir.x);
+  };
+
+  std::vector<Detection> found;
+  cv::Mat claimed = cv::Mat::zeros(residual.size(), CV_8U);  // blobs already taken at a higher level
+  std::vector<double> levels = options.levels_sigma;
+  std::sort(levels.rbegin(), levels.rend());
+  for (double level : levels) {
+    cv::Mat mask = (smooth > level * noise_sigma) & (allowed > 0);
+    cv::Mat labels, stats, centroids;
+    const int n = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
+    for (int i = 1; i < n; ++i) {
+      const int area = stats.at<int>(i, cv::CC_STAT_AREA);
+      if (area < options.min_area_px) continue;
+      const cv::Rect box(stats.at<int>(i, cv::CC_STAT_LEFT), stats.at<int>(i, cv::CC_STAT_TOP),
+                         stats.at<int>(i, cv::CC_STAT_WIDTH), stats.at<int>(i, cv::CC_STAT_HEIGHT));
+      cv::Mat blob = labels(box) == i;
+      // Already claimed at a higher level: the same ghost (or its brighter neighbour).
+      if (cv::countNonZero(claimed(box) & blob) > area / 4) continue;
+      const cv::Point2d centroid(centroids.at<double>(i, 0) + 0.5, centroids.at<double>(i, 1) + 0.5);
+      // Elongated thin blobs are starburst spikes or edges of the light's zone, not ghosts.
+      const double aspect = double(std::max(box.width, box.height)) / std::max(1, std::min(box.width, box.height));
+      if (aspect > 6) continue;
+      // The box's centre on the axis: symmetric ghosts have their mirror axis there.
+      const cv::Point2d box_center(box.x + box.width / 2.0, box.y + box.height / 2.0);
+      if (axisOffset(box_center) > options.max_axis_offset * H &&
+          axisOffset(centroid) > options.max_axis_offset * H)
+        continue;
+      Detection d;
+      d.blob = box;
+      d.level_sigma = level;
+      double peak = 0;
+      cv::minMaxLoc(smooth(box), nullptr, &peak, nullptr, nullptr, blob);
+      d.peak = peak;
+      // Values over the blob: the border value from the bright end, the inside from the median.
+      std::vector<float> values;
+      for (int y = 0; y < box.height; ++y)
+        for (int x = 0; x < box.width; ++x)
+          if (blob.at<uchar>(y, x)) values.push_back(residual.at<float>(box.y + y, box.x + x));
+      std::sort(values.begin(), values.end());
+      const double median = values[values.size() / 2];
+      const double high = values[static_cast<size_t>(0.9 * (values.size() - 1))];
+      model::GhostParameters& g = d.seed;
+      g.channels = 1;
+      // The mirror axis: the box is symmetric about it unless the image border cuts it.
+      const bool cut_top = box.y <= 0, cut_bottom = box.y + box.height >= H;
+      double my = box_center.y;
+      if (cut_top != cut_bottom) my = center.y;
+      g.center_y = my;
+      g.height = std::max({2.0, my - box.y, box.y + box.height - my});
+      g.center_x = box_center.x;
+      g.left = g.right = std::max(2.0, box.width / 2.0);
+      // Cut by the left or right border: the ghost reaches beyond it; keep its round shape.
+      if (box.x <= 0 && box.x + box.width < W) {
+        g.right = std::max(g.right, g.height * 0.5);
+        g.center_x = box.x + box.width - g.right;
+        g.left = std::max(g.right, g.height);
+        g.right = g.left;
+        g.center_x = box.x + box.width - g.right;
+      } else if (box.x + box.width >= W && box.x > 0) {
+        g.left = std::max(g.left, g.height);
+        g.right = g.left;
+        g.center_x = box.x + g.left;
+      }
+      g.curvature_left = g.curvature_right = model::kEllipseCurvature;
+      g.border = {std::max(high, 1e-12), 0, 0};
+      g.inside = {std::max(median, 0.0), 0, 0};
+      g.inside_falloff = std::max(1.0, 0.15 * std::min(g.left + g.right, 2 * g.height) / 2);
+      g.inside_exponent = 1;
+      g.outside_falloff = 2;
+      g.outside_exponent = 1;
+      found.push_back(d);
+      claimed(box).setTo(255, blob);
+    }
+  }
+  std::sort(found.begin(), found.end(),
+            [](const Detection& a, const Detection& b) { return a.peak > b.peak; });
+  if (static_cast<int>(found.size()) > options.max_new_per_frame)
+    found.resize(options.max_new_per_frame);
+  return found;
+}
+
+}  // namespace flarekit::fit

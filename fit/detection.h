@@ -1,0 +1,68 @@
+#pragma once
+// Automatic key frames and initial parameters (Walch et al. 2018 §3.3.2 sets them by hand).
+//
+// Ghosts lie on the line through the light's image and the image centre and are mirror-symmetric
+// about it (shared/FITTING_NOTES.md). Detection works on the residual: the frame minus every ghost
+// already modelled. It finds the light's own image (its saturated core, halo and starburst) and
+// keeps out of it, smooths the residual, thresholds it at several levels (HDR ghosts span orders
+// of magnitude: a bright ghost and a faint one beside it separate at some level), and turns every
+// connected blob whose centre lies near the axis into a seed: centre from the blob's centroid on
+// the axis, L, R, h from its box, Ib and Ii from its values, an ellipse (Cl = Cr = 0.5523).
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "model/ghost_shape.h"
+
+namespace flarekit::fit {
+
+struct DetectionOptions {
+  // Gaussian smoothing of the residual before thresholding, pixels (> 0).
+  double smoothing_px = 2.0;
+  // Threshold levels in noise σ of the (unsmoothed) frame, tried from the highest down; a blob
+  // is kept at the first level where it is separate from the light's zone. Each > 0.
+  std::vector<double> levels_sigma = {1000, 100, 20, 6};
+  // Smallest blob, pixels (≥ 1).
+  int min_area_px = 30;
+  // A blob's centroid may lie at most this far from the axis (light–centre line), as a fraction
+  // of the image height (> 0).
+  double max_axis_offset = 0.06;
+  // The light's zone reaches where the azimuthal median around the light falls below this many
+  // noise σ above the frame's median, times zone_margin (≥ 1). Blobs inside are ignored.
+  double light_zone_sigma = 50;
+  double zone_margin = 1.15;
+  // At most this many new ghosts per frame (≥ 1).
+  int max_new_per_frame = 4;
+
+  bool IsValid(std::string* error) const;
+};
+
+// The light's image in a frame.
+struct LightImage {
+  bool found = false;        // false: the light is outside the frame (no saturated core)
+  cv::Point2d center;        // image pixels
+  double zone_radius_px = 0; // core + halo + starburst: detection keeps out of this disc
+};
+
+// Finds the light: the centroid of the largest saturated (or brightest) blob; its zone from the
+// azimuthal median profile around it. `valid` is the frame's mask (0 = saturated / non-finite).
+LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double noise_sigma,
+                     const DetectionOptions& options);
+
+// A candidate ghost.
+struct Detection {
+  model::GhostParameters seed;
+  cv::Rect blob;            // the blob's box
+  double peak = 0;          // its highest smoothed residual
+  double level_sigma = 0;   // the level it was found at
+};
+
+// Blobs of `residual` (CV_32FC1 luminance; frame minus the modelled ghosts), brightest first.
+// Seeds are grey (channels = 1); the caller spreads them over colour channels.
+std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& valid,
+                                    double noise_sigma, const LightImage& light,
+                                    const DetectionOptions& options);
+
+}  // namespace flarekit::fit

@@ -1,0 +1,623 @@
+#include "fit/fit_capture.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <sstream>
+
+#include <Eigen/Dense>
+#include <opencv2/imgproc.hpp>
+
+#include "common/error.h"
+#include "common/image.h"
+#include "common/log.h"
+#include "common/progress.h"
+#include "model/model_renderer.h"
+
+namespace flarekit::fit {
+
+using model::GhostParameters;
+
+bool TrackingOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (extrapolation_frames < 1) return fail("extrapolation_frames must be ≥ 1");
+  if (extrapolation_degree < 0 || extrapolation_degree > 3) return fail("extrapolation_degree must be in [0, 3]");
+  if (!(min_peak_sigma > 0)) return fail("min_peak_sigma must be > 0");
+  if (!(min_visible_fraction >= 0 && min_visible_fraction <= 1)) return fail("min_visible_fraction must be in [0, 1]");
+  if (!(min_cost_reduction >= 0 && min_cost_reduction <= 1)) return fail("min_cost_reduction must be in [0, 1]");
+  if (!(unexplained_fraction > 0)) return fail("unexplained_fraction must be > 0");
+  if (detect_every < 1) return fail("detect_every must be ≥ 1");
+  if (min_track_frames < 1) return fail("min_track_frames must be ≥ 1");
+  return true;
+}
+
+bool FitOptions::IsValid(std::string* error) const {
+  if (!cost.IsValid(error) || !solver.IsValid(error) || !detection.IsValid(error) ||
+      !tracking.IsValid(error))
+    return false;
+  if (!auto_degree && (degree < 0 || degree > model::kMaxPolynomialDegree)) {
+    if (error) *error = "degree must be in [0, " + std::to_string(model::kMaxPolynomialDegree) + "]";
+    return false;
+  }
+  if (threads < 1) {
+    if (error) *error = "threads must be ≥ 1";
+    return false;
+  }
+  return true;
+}
+
+std::string FitSummary::BriefReport() const {
+  std::ostringstream s;
+  s.precision(3);
+  s << "Fitted " << ghosts << " ghost(s) over " << frames_fitted << " of " << frames_total
+    << " frames with " << optimizer << " in " << seconds_total << " s (fitting " << seconds_fitting
+    << " s, detection " << seconds_detecting << " s); " << detections << " ghost(s) detected, "
+    << detections_rejected << " candidate(s) rejected, " << ghosts_dropped_short
+    << " short track(s) dropped; " << iterations << " iterations, " << evaluations
+    << " cost evaluations; polynomial degree " << (degree < 0 ? std::string("auto") : std::to_string(degree)) << ".";
+  if (!unexplained.empty()) {
+    s << " Not described by the model in part of their frames:";
+    for (const auto& [id, fraction] : unexplained) s << " ghost " << id << " (" << 100 * fraction << " %)";
+    s << ".";
+  }
+  if (!warnings.empty()) s << " " << warnings.size() << " warning(s).";
+  return s.str();
+}
+
+// ── Polynomials ───────────────────────────────────────────────────────────────────────────────
+
+model::Polynomial fitPolynomial(const std::vector<double>& angles, const std::vector<double>& values,
+                                int degree) {
+  const int n = static_cast<int>(angles.size());
+  if (n == 0) return {{0.0}};
+  degree = std::clamp(degree, 0, n - 1);
+  const double t0 = std::accumulate(angles.begin(), angles.end(), 0.0) / n;
+  double scale = 0;
+  for (double a : angles) scale = std::max(scale, std::abs(a - t0));
+  if (scale <= 0) scale = 1;
+  Eigen::MatrixXd A(n, degree + 1);
+  Eigen::VectorXd b(n);
+  for (int i = 0; i < n; ++i) {
+    const double t = (angles[i] - t0) / scale;
+    double p = 1;
+    for (int k = 0; k <= degree; ++k, p *= t) A(i, k) = p;
+    b(i) = values[i];
+  }
+  const Eigen::VectorXd a = A.colPivHouseholderQr().solve(b);
+  // Expand Σ a_k ((θ − t0)/s)^k into powers of θ.
+  std::vector<double> c(degree + 1, 0.0);
+  for (int k = 0; k <= degree; ++k) {
+    const double ak = a(k) / std::pow(scale, k);
+    double binom = 1;  // C(k, j)
+    for (int j = 0; j <= k; ++j) {
+      c[j] += ak * binom * std::pow(-t0, k - j);
+      binom = binom * (k - j) / (j + 1);
+    }
+  }
+  return {c};
+}
+
+GhostParameters extrapolate(const std::vector<double>& angles, const std::vector<GhostParameters>& fits,
+                            double angle, int frames, int degree) {
+  const int n = static_cast<int>(angles.size());
+  // The `frames` fits nearest to the angle.
+  std::vector<int> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    return std::abs(angles[a] - angle) < std::abs(angles[b] - angle);
+  });
+  order.resize(std::min(n, frames));
+  const int channels = fits[0].channels;
+  const int count = model::parameterCount(channels);
+  std::vector<double> a;
+  std::vector<std::vector<double>> v(count);
+  for (int i : order) {
+    a.push_back(angles[i]);
+    auto p = model::toParameterVector(fits[i]);
+    for (int k = 0; k < count; ++k) v[k].push_back(p[k]);
+  }
+  // Fewer points than 2 × (degree + 1) make extrapolations noisy: lower the degree.
+  const int d = std::min(degree, std::max(0, static_cast<int>(a.size()) / 2 - 1));
+  std::vector<double> out(count);
+  for (int k = 0; k < count; ++k) out[k] = fitPolynomial(a, v[k], d).evaluate(angle);
+  return model::clampToBounds(model::fromParameterVector(out, channels));
+}
+
+namespace {
+
+bool polynomialWithinBounds(const model::Polynomial& p, int index, int channels, double lo, double hi) {
+  const auto b = model::parameterBounds(index, channels);
+  for (int i = 0; i <= 64; ++i) {
+    const double v = p.evaluate(lo + (hi - lo) * i / 64.0);
+    if (!std::isfinite(v) || v < b.lower || v > b.upper) return false;
+  }
+  return true;
+}
+
+int autoDegree(const std::vector<double>& a, const std::vector<double>& v) {
+  // Held-out error: fit on every other frame, measure on the rest (and the other way round).
+  int best = 1;
+  double best_error = std::numeric_limits<double>::infinity();
+  for (int d = 1; d <= 4; ++d) {
+    double error = 0;
+    int used = 0;
+    for (int parity = 0; parity < 2; ++parity) {
+      std::vector<double> ta, tv;
+      for (size_t i = 0; i < a.size(); ++i)
+        if (static_cast<int>(i % 2) == parity) {
+          ta.push_back(a[i]);
+          tv.push_back(v[i]);
+        }
+      if (static_cast<int>(ta.size()) < d + 2) continue;
+      const auto p = fitPolynomial(ta, tv, d);
+      for (size_t i = 0; i < a.size(); ++i)
+        if (static_cast<int>(i % 2) != parity) {
+          const double e = p.evaluate(a[i]) - v[i];
+          error += e * e;
+          ++used;
+        }
+    }
+    if (used == 0) break;
+    error /= used;
+    // A higher degree must earn its place: 2 % lower error.
+    if (error < 0.98 * best_error) {
+      best_error = error;
+      best = d;
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, const model::CaptureInfo& info,
+                                  int channels, int degree) {
+  model::FlareModel m;
+  m.capture = info;
+  m.channels = channels;
+  for (const auto& t : tracks) {
+    model::GhostTrack g;
+    g.id = t.id;
+    g.angle_min_deg = t.angles_deg.front();
+    g.angle_max_deg = t.angles_deg.back();
+    const int count = model::parameterCount(channels);
+    for (int k = 0; k < count; ++k) {
+      std::vector<double> v;
+      for (const auto& f : t.fits) v.push_back(model::toParameterVector(f)[k]);
+      int d = degree < 0 ? autoDegree(t.angles_deg, v) : degree;
+      model::Polynomial p = fitPolynomial(t.angles_deg, v, d);
+      // Lower the degree until the polynomial stays within the parameter's bounds over the
+      // range (degree 0, the mean of in-bounds values, always does).
+      while (!polynomialWithinBounds(p, k, channels, g.angle_min_deg, g.angle_max_deg) && d > 0)
+        p = fitPolynomial(t.angles_deg, v, --d);
+      g.parameters.push_back(p);
+    }
+    m.ghosts.push_back(std::move(g));
+  }
+  return m;
+}
+
+// ── The capture fitter ────────────────────────────────────────────────────────────────────────
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+struct Track {
+  int id = 0;
+  int key_frame = 0;                       // position in the fitted frame list
+  std::map<int, GhostParameters> fits;     // by position in the fitted frame list
+  bool ended_high = false, ended_low = false;
+  std::string end_high = "last frame", end_low = "first frame";
+};
+
+struct SolveStats {
+  double cost = 0;
+  long long evaluations = 0;
+  int iterations = 0;
+};
+
+double peakOf(const GhostParameters& g) {
+  double p = 0;
+  for (int c = 0; c < g.channels; ++c) p = std::max({p, g.border[c], g.inside[c]});
+  return p;
+}
+
+class CaptureFitter {
+ public:
+  CaptureFitter(const FrameStack& stack, const FitOptions& options)
+      : stack_(stack), options_(options), edge_(options.cost) {
+    for (int i = 0; i < static_cast<int>(stack.frames.size()); ++i)
+      if (!options.holdout_odd || i % 2 == 0) positions_.push_back(i);
+    solver_ = options.solver;
+    solver_.threads = options.threads;
+  }
+
+  FitResult run() {
+    const auto t0 = Clock::now();
+    Progress progress("fit", 2 * static_cast<long long>(positions_.size()));
+    // Forward sweep: track and detect.
+    for (int pos = 0; pos < static_cast<int>(positions_.size()); ++pos) {
+      fitFrame(pos, /*forward=*/true);
+      progress.advance();
+    }
+    // Backward sweep: extend every track below its key frame, refit with all ghosts known.
+    for (int pos = static_cast<int>(positions_.size()) - 1; pos >= 0; --pos) {
+      fitFrame(pos, /*forward=*/false);
+      progress.advance();
+    }
+    progress.finish();
+    return finish(since(t0));
+  }
+
+ private:
+  const Frame& frame(int pos) const { return stack_.frames[positions_[pos]]; }
+  double angle(int pos) const { return frame(pos).angle_deg; }
+
+  // The seed of a track at `pos` from its fits (nearest first).
+  GhostParameters seedFor(const Track& t, int pos) const {
+    std::vector<double> a;
+    std::vector<GhostParameters> f;
+    for (const auto& [p, g] : t.fits) {
+      a.push_back(angle(p));
+      f.push_back(g);
+    }
+    return extrapolate(a, f, angle(pos), options_.tracking.extrapolation_frames,
+                       options_.tracking.extrapolation_degree);
+  }
+
+  // Why a fitted ghost ends here, or "" when it goes on.
+  std::string endReason(const GhostParameters& g, double noise_sigma) const {
+    const cv::Rect2d box = model::outlineBounds(g);
+    const cv::Rect2d image(0, 0, stack_.size.width, stack_.size.height);
+    const double inside = (box & image).area();
+    if (box.area() <= 0 || inside < options_.tracking.min_visible_fraction * box.area())
+      return "left the image";
+    if (peakOf(g) < options_.tracking.min_peak_sigma * noise_sigma) return "sank into the noise";
+    const double diag = std::hypot(stack_.size.width, stack_.size.height);
+    if (std::max({g.left, g.right, g.height}) > 0.98 * diag || std::min({g.left, g.right, g.height}) < 0.6)
+      return "fit broke down (size at its bound)";
+    return "";
+  }
+
+  // Fits `ghosts` jointly per overlapping group; updates them in place.
+  SolveStats solveFrame(const FramePyramid& data, std::vector<GhostParameters>& ghosts) {
+    SolveStats stats;
+    const int n = static_cast<int>(ghosts.size());
+    if (n == 0) return stats;
+    // Groups: ghosts whose regions (grown by the margin and the filter radius) overlap.
+    std::vector<int> parent(n);
+    std::iota(parent.begin(), parent.end(), 0);
+    std::function<int(int)> find = [&](int i) { return parent[i] == i ? i : parent[i] = find(parent[i]); };
+    const int grow = static_cast<int>(options_.cost.region_margin_px) + edge_.radius();
+    std::vector<cv::Rect> boxes;
+    for (const auto& g : ghosts) {
+      cv::Rect b = model::ghostPixelBounds(g);
+      boxes.emplace_back(b.x - grow, b.y - grow, b.width + 2 * grow, b.height + 2 * grow);
+    }
+    const cv::Rect image(0, 0, stack_.size.width, stack_.size.height);
+    for (int i = 0; i < n; ++i)
+      for (int j = i + 1; j < n; ++j)
+        if (!(boxes[i] & boxes[j] & image).empty()) parent[find(i)] = find(j);
+    std::map<int, std::vector<int>> groups;
+    for (int i = 0; i < n; ++i) groups[find(i)].push_back(i);
+    for (const auto& [root, members] : groups) {
+      std::vector<GhostParameters> seeds, others;
+      for (int i : members) seeds.push_back(ghosts[i]);
+      for (int i = 0; i < n; ++i)
+        if (find(i) != root) others.push_back(ghosts[i]);
+      GroupCost cost(data, edge_, others, seeds, options_.cost);
+      GroupFitResult r = solveGroup(cost, seeds, solver_);
+      for (size_t k = 0; k < members.size(); ++k) ghosts[members[k]] = r.ghosts[k];
+      stats.cost += r.final_cost;
+      stats.evaluations += r.evaluations;
+      stats.iterations += r.iterations;
+    }
+    return stats;
+  }
+
+  GhostParameters toChannels(const GhostParameters& grey, const cv::Mat& image, cv::Rect blob) const {
+    GhostParameters g = grey;
+    g.channels = stack_.channels;
+    if (stack_.channels == 1) return g;
+    const cv::Scalar mean = cv::mean(image(blob & cv::Rect(0, 0, image.cols, image.rows)));
+    const double lum = 0.2126 * mean[0] + 0.7152 * mean[1] + 0.0722 * mean[2];
+    for (int c = 0; c < 3; ++c) {
+      const double ratio = lum > 0 ? std::max(0.0, mean[c] / lum) : 1.0;
+      g.border[c] = grey.border[0] * ratio;
+      g.inside[c] = grey.inside[0] * ratio;
+    }
+    return g;
+  }
+
+  void fitFrame(int pos, bool forward) {
+    const Frame& f = frame(pos);
+    auto t_fit = Clock::now();
+    FramePyramid data(f.image, f.valid, edge_);
+    const double noise_sigma = data.full().noise_sigma;
+    FrameFit& record = frame_fits_[pos];
+    record.angle_deg = f.angle_deg;
+    record.frame = positions_[pos];
+    record.noise_sigma = noise_sigma;
+
+    // The ghosts in this frame and their seeds.
+    std::vector<int> ids;
+    std::vector<GhostParameters> ghosts;
+    for (auto& t : tracks_) {
+      if (forward) {
+        if (t.ended_high || t.fits.empty()) continue;
+        if (t.fits.rbegin()->first >= pos) continue;
+        ghosts.push_back(seedFor(t, pos));
+      } else {
+        auto it = t.fits.find(pos);
+        if (it != t.fits.end()) {
+          ghosts.push_back(it->second);
+        } else {
+          if (t.ended_low || t.fits.empty() || t.fits.begin()->first < pos) continue;
+          ghosts.push_back(seedFor(t, pos));
+        }
+      }
+      ids.push_back(t.id);
+    }
+    SolveStats stats = solveFrame(data, ghosts);
+
+    // Ends and records.
+    std::vector<int> kept_ids;
+    std::vector<GhostParameters> kept;
+    for (size_t i = 0; i < ghosts.size(); ++i) {
+      Track& t = track(ids[i]);
+      const std::string reason = endReason(ghosts[i], noise_sigma);
+      const bool had = t.fits.count(pos) > 0;
+      if (!reason.empty()) {
+        if (forward) {
+          t.ended_high = true;
+          t.end_high = reason;
+        } else if (!had || t.fits.begin()->first == pos) {
+          t.ended_low = true;
+          t.end_low = reason;
+          t.fits.erase(pos);
+        } else {
+          t.fits.erase(pos);  // a frame in the middle the ghost cannot be fitted in
+        }
+        continue;
+      }
+      // Backward: a ghost extended onto another one (the same ghost found twice) stops.
+      if (!forward && !had) {
+        bool duplicate = false;
+        for (size_t j = 0; j < ghosts.size(); ++j)
+          if (j != i && sameGhost(ghosts[i], ghosts[j])) duplicate = true;
+        if (duplicate) {
+          t.ended_low = true;
+          t.end_low = "merged with another track";
+          continue;
+        }
+      }
+      t.fits[pos] = ghosts[i];
+      kept_ids.push_back(ids[i]);
+      kept.push_back(ghosts[i]);
+    }
+    seconds_fitting_ += since(t_fit);
+
+    // Detection of new ghosts (forward sweep only).
+    if (forward && pos % options_.tracking.detect_every == 0) {
+      auto t_det = Clock::now();
+      detectNew(pos, data, kept_ids, kept, stats);
+      seconds_detecting_ += since(t_det);
+    }
+    record.ghost_ids = kept_ids;
+    record.ghosts = kept;
+    if (logLevel() >= LogLevel::kDebug) {
+      std::ostringstream m;
+      m << "fit: " << (forward ? "forward" : "backward") << " θ = " << f.angle_deg << "°: "
+        << kept.size() << " ghost(s), " << stats.iterations << " iterations, " << stats.evaluations
+        << " evaluations, " << since(t_fit) << " s;";
+      for (size_t i = 0; i < kept.size(); ++i)
+        m << " #" << kept_ids[i] << " (" << kept[i].center_x << ", " << kept[i].center_y << ") L "
+          << kept[i].left << " R " << kept[i].right << " h " << kept[i].height << " Ib "
+          << kept[i].border[0] << " Ii " << kept[i].inside[0] << ";";
+      logDebug(m.str());
+    }
+    record.cost = stats.cost;
+    record.evaluations += stats.evaluations;
+    record.iterations += stats.iterations;
+    evaluations_ += stats.evaluations;
+    iterations_ += stats.iterations;
+  }
+
+  bool sameGhost(const GhostParameters& a, const GhostParameters& b) const {
+    const double size_a = std::max({a.left, a.right, a.height});
+    const double size_b = std::max({b.left, b.right, b.height});
+    return std::hypot(a.center_x - b.center_x, a.center_y - b.center_y) < 0.15 * std::min(size_a, size_b) + 1 &&
+           std::abs(size_a - size_b) < 0.15 * std::max(size_a, size_b);
+  }
+
+  // Detection runs on a level of about 160 000 pixels (the blobs it seeds are refined at once).
+  int detectionFactor() const {
+    return std::max(1, static_cast<int>(std::floor(std::sqrt(stack_.size.area() / 160000.0))));
+  }
+
+  // The residual (luminance) of the frame minus `ghosts` at level `level.factor`.
+  cv::Mat residualAt(const FrameData& level, const std::vector<GhostParameters>& ghosts) const {
+    model::ViewTransform view;
+    view.scale = 1.0 / level.factor;
+    if (ghosts.empty()) return luminance(level.image);
+    cv::Mat modelled = model::renderGhosts(ghosts, level.image.size(), stack_.channels, {}, view);
+    return luminance(level.image - modelled);
+  }
+
+  void detectNew(int pos, const FramePyramid& data, std::vector<int>& ids,
+                 std::vector<GhostParameters>& ghosts, SolveStats& stats) {
+    const double noise_sigma = data.full().noise_sigma;
+    const int kd = detectionFactor();
+    const FrameData& level = data.level(kd);
+    cv::Mat residual = residualAt(level, ghosts);
+    const LightImage light = findLight(luminance(level.image), level.valid, level.noise_sigma, options_.detection);
+    FrameFit& record = frame_fits_[pos];
+    record.light_found = light.found;
+    record.light_center = light.center * kd;
+    record.light_zone_px = light.zone_radius_px * kd;
+    auto candidates = detectGhosts(residual, level.valid, level.noise_sigma, light, options_.detection);
+    for (const auto& c : candidates) {
+      GhostParameters grey = c.seed;
+      grey.center_x *= kd;
+      grey.center_y *= kd;
+      grey.left *= kd;
+      grey.right *= kd;
+      grey.height *= kd;
+      grey.inside_falloff *= kd;
+      grey.outside_falloff *= kd;
+      const cv::Rect blob(c.blob.x * kd, c.blob.y * kd, c.blob.width * kd, c.blob.height * kd);
+      GhostParameters seed = toChannels(grey, data.full().image, blob);
+      bool duplicate = false;
+      for (const auto& g : ghosts)
+        if (sameGhost(seed, g)) duplicate = true;
+      if (duplicate) {
+        ++rejected_;
+        continue;
+      }
+      std::vector<GhostParameters> one = {seed};
+      GroupCost cost(data, edge_, ghosts, one, options_.cost);
+      GhostParameters dark = seed;
+      dark.border = {0, 0, 0};
+      dark.inside = {0, 0, 0};
+      std::vector<GhostParameters> none = {dark};
+      const double cost_without = cost.evaluate(none, false);
+      GroupFitResult r = solveGroup(cost, one, solver_);
+      stats.evaluations += r.evaluations;
+      stats.iterations += r.iterations;
+      const GhostParameters& g = r.ghosts[0];
+      const bool explains = r.final_cost <= (1 - options_.tracking.min_cost_reduction) * cost_without;
+      bool dup_after = false;
+      for (const auto& o : ghosts)
+        if (sameGhost(g, o)) dup_after = true;
+      if (!explains || dup_after || !endReason(g, noise_sigma).empty()) {
+        ++rejected_;
+        continue;
+      }
+      Track t;
+      t.id = next_id_++;
+      t.key_frame = pos;
+      t.fits[pos] = g;
+      tracks_.push_back(t);
+      ids.push_back(t.id);
+      ghosts.push_back(g);
+      ++detections_;
+    }
+  }
+
+  Track& track(int id) {
+    for (auto& t : tracks_)
+      if (t.id == id) return t;
+    throw std::logic_error("unknown track");
+  }
+
+  FitResult finish(double seconds) {
+    FitResult result;
+    FitSummary& s = result.summary;
+    s.optimizer = optimizerName(options_.solver.optimizer);
+    s.frames_total = static_cast<int>(stack_.frames.size());
+    s.frames_fitted = static_cast<int>(positions_.size());
+    s.degree = options_.auto_degree ? -1 : options_.degree;
+    s.warnings = stack_.warnings;
+    // Residual RMS per ghost and frame, against the final fits of every frame.
+    std::map<int, std::vector<std::pair<int, GhostParameters>>> by_frame;
+    for (const auto& t : tracks_)
+      for (const auto& [pos, g] : t.fits) by_frame[pos].push_back({t.id, g});
+    std::map<int, std::map<int, double>> rms;  // id → pos → rms
+    for (auto& [pos, list] : by_frame) {
+      std::vector<GhostParameters> all;
+      for (const auto& [id, g] : list) all.push_back(g);
+      const Frame& f = frame(pos);
+      FramePyramid pyramid(f.image, f.valid, edge_);
+      const int kd = detectionFactor();
+      const FrameData& level = pyramid.level(kd);
+      cv::Mat residual = residualAt(level, all);
+      for (const auto& [id, g] : list) {
+        const cv::Rect2d b = model::outlineBounds(g);
+        const cv::Rect box = cv::Rect(cv::Rect2d(b.x / kd, b.y / kd, b.width / kd, b.height / kd)) &
+                             cv::Rect(0, 0, residual.cols, residual.rows);
+        if (box.empty()) continue;
+        cv::Mat sq;
+        cv::multiply(residual(box), residual(box), sq);
+        const cv::Scalar mean = cv::mean(sq, level.valid(box));
+        rms[id][pos] = std::sqrt(mean[0]);
+      }
+      FrameFit& record = frame_fits_[pos];
+      record.ghost_ids.clear();
+      record.ghosts.clear();
+      for (const auto& [id, g] : list) {
+        record.ghost_ids.push_back(id);
+        record.ghosts.push_back(g);
+      }
+    }
+    for (const auto& t : tracks_) {
+      if (static_cast<int>(t.fits.size()) < options_.tracking.min_track_frames) {
+        ++s.ghosts_dropped_short;
+        continue;
+      }
+      GhostTrackFit out;
+      out.id = t.id;
+      out.key_frame = t.key_frame;
+      out.end_low = t.end_low;
+      out.end_high = t.end_high;
+      int flagged = 0;
+      for (const auto& [pos, g] : t.fits) {
+        out.angles_deg.push_back(angle(pos));
+        out.fits.push_back(g);
+        const double peak = peakOf(g);
+        const double r = rms[t.id].count(pos) ? rms[t.id][pos] : 0;
+        out.residual_rms.push_back(r);
+        out.peak.push_back(peak);
+        const bool bad = r > options_.tracking.unexplained_fraction * peak;
+        out.unexplained.push_back(bad);
+        flagged += bad;
+      }
+      if (flagged > 0) s.unexplained.push_back({t.id, double(flagged) / t.fits.size()});
+      result.tracks.push_back(std::move(out));
+    }
+    if (result.tracks.empty())
+      throw InputError(stack_.source.string(), "no ghost found in any frame: nothing to fit");
+    result.model = buildFlareModel(result.tracks, stack_.info, stack_.channels,
+                                   options_.auto_degree ? -1 : options_.degree);
+    for (const auto& [pos, fit] : frame_fits_) result.frames.push_back(fit);
+    s.ghosts = static_cast<int>(result.tracks.size());
+    s.detections = detections_;
+    s.detections_rejected = rejected_;
+    s.evaluations = evaluations_;
+    s.iterations = iterations_;
+    s.seconds_total = seconds;
+    s.seconds_fitting = seconds_fitting_;
+    s.seconds_detecting = seconds_detecting_;
+    return result;
+  }
+
+  const FrameStack& stack_;
+  FitOptions options_;
+  SolverOptions solver_;
+  EdgeFilter edge_;
+  std::vector<int> positions_;
+  std::vector<Track> tracks_;
+  std::map<int, FrameFit> frame_fits_;
+  int next_id_ = 0;
+  int detections_ = 0, rejected_ = 0;
+  long long evaluations_ = 0, iterations_ = 0;
+  double seconds_fitting_ = 0, seconds_detecting_ = 0;
+};
+
+}  // namespace
+
+FitResult fitCapture(const FrameStack& stack, const FitOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument("FitOptions: " + error);
+  if (stack.frames.empty()) throw InputError(stack.source.string(), "no frames to fit");
+  CaptureFitter fitter(stack, options);
+  return fitter.run();
+}
+
+}  // namespace flarekit::fit

@@ -1,0 +1,151 @@
+#pragma once
+// Fitting a whole capture (Walch et al. 2018 §3.3.2, automated): every ghost is found, tracked
+// over the angles, fitted per frame, and summarised by one polynomial per parameter (the flare
+// model file of model/flare_model.h).
+//
+// The flow:
+//  1. Forward sweep over the frames in angle order. In each frame the ghosts being tracked are
+//     seeded from their previous fits, extrapolated to the frame's angle by a least-squares
+//     polynomial over the last frames (§3.3.2: "we fit a polynomial to each parameter ... to
+//     estimate initial parameters for neighboring images"); ghosts whose regions overlap are
+//     fitted together (fit/group_solver.h). Then the residual (frame minus all fitted ghosts) is
+//     searched for new ghosts (fit/detection.h); each new one is fitted and kept when it explains
+//     its blob. The frame where a ghost is first found is its key frame.
+//  2. Backward sweep: every ghost is tracked from its key frame towards smaller angles too (ghosts
+//     are hardest to see near the light, where the sweep starts), the whole frame refitted with
+//     the ghosts known there.
+//  3. A track ends where the ghost leaves the image (less than min_visible_fraction of its box
+//     inside), sinks into the noise (its peak below min_peak_sigma noise σ), or the fit breaks
+//     down (a size at its bound). Identities are kept where ghosts cross because each ghost keeps
+//     its own parameter block seeded from its own extrapolation.
+//  4. Polynomials per ghost and parameter over its tracked range (degree 2 by default, or chosen
+//     1–4 by held-out error).
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "fit/cost.h"
+#include "fit/detection.h"
+#include "fit/frames.h"
+#include "fit/group_solver.h"
+#include "model/flare_model.h"
+
+namespace flarekit::fit {
+
+struct TrackingOptions {
+  // Frames of a track used for the polynomial extrapolation of the next seed (≥ 1).
+  int extrapolation_frames = 8;
+  // Degree of that extrapolation (0–3; capped by the frames available).
+  int extrapolation_degree = 2;
+  // A ghost ends when its peak max(Ib, Ii) falls below this many noise σ (> 0).
+  double min_peak_sigma = 4;
+  // A ghost ends when less than this fraction of its box lies in the image (0–1).
+  double min_visible_fraction = 0.05;
+  // A new ghost is kept when its fit lowers its region's cost by at least this fraction (0–1).
+  double min_cost_reduction = 0.2;
+  // A ghost's fit counts as "not described by the model" (a caustic, fold or other shape the
+  // model cannot draw) when the residual's RMS over its region exceeds this fraction of its peak.
+  double unexplained_fraction = 0.25;
+  // Frames in which new ghosts are searched for (1 = every frame; larger saves time) (≥ 1).
+  int detect_every = 1;
+  // Tracks shorter than this many frames are dropped as spurious (and counted) (≥ 1).
+  int min_track_frames = 3;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct FitOptions {
+  CostOptions cost;
+  SolverOptions solver;
+  DetectionOptions detection;
+  TrackingOptions tracking;
+  // Polynomial degree per parameter (1–kMaxPolynomialDegree); ignored when auto_degree.
+  int degree = 2;
+  // Choose the degree 1–4 per ghost and parameter by held-out error (every other tracked frame).
+  bool auto_degree = false;
+  // Fit on every other frame only (frames 0, 2, 4, … in angle order), to evaluate on the others.
+  bool holdout_odd = false;
+  // Threads for Ceres and the renderer (≥ 1).
+  int threads = 2;
+  // Progress on stderr.
+  bool progress = true;
+
+  bool IsValid(std::string* error) const;
+};
+
+// One ghost over the frames it was tracked in.
+struct GhostTrackFit {
+  int id = 0;
+  int key_frame = 0;                          // index into the fitted frame list
+  std::vector<double> angles_deg;             // ascending
+  std::vector<model::GhostParameters> fits;   // per angle
+  std::vector<double> residual_rms;           // RMS residual over the ghost's region, per angle
+  std::vector<double> peak;                   // max(Ib, Ii) per angle
+  std::vector<bool> unexplained;              // residual_rms > unexplained_fraction × peak
+  std::string end_low, end_high;              // why the track ends at either side
+};
+
+// One fitted frame.
+struct FrameFit {
+  double angle_deg = 0;
+  int frame = 0;                    // index in the FrameStack
+  double noise_sigma = 0;
+  bool light_found = false;
+  cv::Point2d light_center;
+  double light_zone_px = 0;
+  std::vector<int> ghost_ids;       // the ghosts fitted in this frame
+  std::vector<model::GhostParameters> ghosts;
+  double cost = 0;                  // sum of the groups' final costs
+  long long evaluations = 0;
+  int iterations = 0;
+};
+
+struct FitSummary {
+  std::string optimizer;
+  int frames_total = 0;        // frames in the stack
+  int frames_fitted = 0;       // frames used (all, or the even ones with holdout)
+  int ghosts = 0;              // ghosts in the model
+  int ghosts_dropped_short = 0;  // tracks shorter than min_track_frames, left out of the model
+  int detections = 0;          // new ghosts accepted
+  int detections_rejected = 0; // candidates whose fit did not explain their blob
+  long long evaluations = 0;   // cost evaluations over all solves
+  long long iterations = 0;
+  double seconds_total = 0, seconds_fitting = 0, seconds_detecting = 0;
+  int degree = 2;              // or -1 for auto
+  // Ghosts the model cannot describe well: id and the fraction of its frames flagged.
+  std::vector<std::pair<int, double>> unexplained;
+  std::vector<std::string> warnings;
+
+  std::string BriefReport() const;
+};
+
+struct FitResult {
+  model::FlareModel model;
+  std::vector<GhostTrackFit> tracks;
+  std::vector<FrameFit> frames;     // in angle order
+  FitSummary summary;
+};
+
+// Fits the stack. Throws std::invalid_argument for invalid options, InputError when nothing can be
+// fitted (no ghost found anywhere).
+FitResult fitCapture(const FrameStack& stack, const FitOptions& options);
+
+// Least-squares polynomial of `degree` through (angles, values), in θ degrees as the model file
+// stores it (solved in a centred, scaled variable for conditioning, then expanded).
+model::Polynomial fitPolynomial(const std::vector<double>& angles_deg,
+                                const std::vector<double>& values, int degree);
+
+// The flare model from the tracks: one GhostTrack per track, each parameter a polynomial of the
+// given degree (or auto 1–4 by held-out error when degree < 0). Degrees are lowered where a
+// polynomial would leave the parameter's bounds inside the range.
+model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
+                                  const model::CaptureInfo& info, int channels, int degree);
+
+// Seeds every parameter of a ghost at `angle_deg` from a track's last fits (polynomial
+// extrapolation over at most `frames` of them, degree ≤ `degree`).
+model::GhostParameters extrapolate(const std::vector<double>& angles_deg,
+                                   const std::vector<model::GhostParameters>& fits,
+                                   double angle_deg, int frames, int degree);
+
+}  // namespace flarekit::fit
