@@ -148,11 +148,16 @@ cv::Mat renderLight(const model::FlareModel& m, double model_angle_deg, double m
   return rgb;
 }
 
-cv::Mat renderOverlay(const model::FlareModel& m, const Scene& scene, const CameraPose& pose, cv::Size size,
-                      const PredictOptions& options, std::vector<LightPrediction>* lights) {
+namespace {
+
+// Every light's prediction at `pose` and, when `images` is given, its own overlay (empty when it
+// has no ghosts); returns the sum of the overlays.
+cv::Mat renderLights(const model::FlareModel& m, const Scene& scene, const CameraPose& pose, cv::Size size,
+                     const PredictOptions& options, std::vector<LightPrediction>* lights, std::vector<cv::Mat>* images) {
   const AngleRange range = sampledRange(m);
   cv::Mat overlay(size, CV_32FC3, cv::Scalar::all(0));
   if (lights) lights->clear();
+  if (images) images->clear();
   for (const SceneLight& light : scene.lights) {
     LightPrediction p;
     p.name = light.name;
@@ -162,15 +167,27 @@ cv::Mat renderOverlay(const model::FlareModel& m, const Scene& scene, const Came
       p.brightness = brightnessScale(captureExposure(m), sceneExposure(scene.camera),
                                      {options.capture_illuminance_lux, p.illuminance_lux});
     }
+    cv::Mat own;
     if (p.geometry.status == LightStatus::kInRange && p.illuminance_lux > 0) {
       p.ghost_count = static_cast<int>(m.ghostsAt(p.geometry.model_angle_deg).size());
-      if (p.ghost_count > 0)
-        overlay += renderLight(m, p.geometry.model_angle_deg, p.geometry.model_roll_deg, p.brightness.scale,
-                               normalisedColor(light.color), size, options.render);
+      if (p.ghost_count > 0) {
+        // Walch 2018 §3.4.1: each light's ghosts at its θ and roll, scaled by Eq. 2, added.
+        own = renderLight(m, p.geometry.model_angle_deg, p.geometry.model_roll_deg, p.brightness.scale,
+                          normalisedColor(light.color), size, options.render);
+        overlay += own;
+      }
     }
     if (lights) lights->push_back(p);
+    if (images) images->push_back(own);
   }
   return overlay;
+}
+
+}  // namespace
+
+cv::Mat renderOverlay(const model::FlareModel& m, const Scene& scene, const CameraPose& pose, cv::Size size,
+                      const PredictOptions& options, std::vector<LightPrediction>* lights) {
+  return renderLights(m, scene, pose, size, options, lights, nullptr);
 }
 
 std::vector<std::vector<double>> ratingDistributions(const model::FlareModel& m, const cv::Mat& scene_image,
@@ -231,14 +248,12 @@ PredictionSummary analyze(const model::FlareModel& m, const Scene& scene, const 
   const cv::Mat scene_img = sceneImage(scene, s.image_size);
 
   // Overlay, light by light (Walch 2018 §3.4.1: ghosts scaled by Eq. 2 and added).
-  cv::Mat overlay = renderOverlay(m, scene, scene.camera.pose, s.image_size, options, &s.lights);
+  std::vector<cv::Mat> own_images;
+  cv::Mat overlay = renderLights(m, scene, scene.camera.pose, s.image_size, options, &s.lights, &own_images);
   s.estimators = computeEstimators(overlay, scene_img, options.estimators);
   for (size_t k = 0; k < s.lights.size(); ++k) {
     LightPrediction& p = s.lights[k];
-    cv::Mat own(s.image_size, CV_32FC3, cv::Scalar::all(0));
-    if (p.ghost_count > 0)
-      own = renderLight(m, p.geometry.model_angle_deg, p.geometry.model_roll_deg, p.brightness.scale,
-                        normalisedColor(scene.lights[k].color), s.image_size, options.render);
+    const cv::Mat own = own_images[k].empty() ? cv::Mat(s.image_size, CV_32FC3, cv::Scalar::all(0)) : own_images[k];
     p.estimators = computeEstimators(own, scene_img, options.estimators);
     p.severity = value(p.estimators, options.severity_estimator);
     p.severity_percentile = kNaN;
