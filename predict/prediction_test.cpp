@@ -113,6 +113,38 @@ TEST(Prediction, GhostsLieOppositeTheLightInEveryDirection) {
   }
 }
 
+TEST(Prediction, LightColourTintsWithoutChangingLuminance) {
+  const model::FlareModel m = oneGhostModel();
+  const cv::Size size{300, 200};
+  Scene white = sceneWithLights({{-6, 0}});
+  Scene warm = white;
+  warm.lights[0].color = {1.0, 0.5, 0.25};
+  const cv::Mat a = renderOverlay(m, white, white.camera.pose, size, PredictOptions{});
+  const cv::Mat b = renderOverlay(m, warm, warm.camera.pose, size, PredictOptions{});
+  const cv::Scalar sa = cv::sum(a), sb = cv::sum(b);
+  // Same Rec. 709 luminance, channel ratios of the colour.
+  const double ya = 0.2126 * sa[0] + 0.7152 * sa[1] + 0.0722 * sa[2];
+  const double yb = 0.2126 * sb[0] + 0.7152 * sb[1] + 0.0722 * sb[2];
+  EXPECT_NEAR(yb / ya, 1.0, 1e-5);
+  EXPECT_NEAR(sb[1] / sb[0], 0.5, 1e-5);
+  EXPECT_NEAR(sb[2] / sb[0], 0.25, 1e-5);
+}
+
+TEST(Prediction, RgbModelsKeepTheirChannels) {
+  // The same ghost with RGB intensities (Ib = Ii = 1, 0.5, 0.2): the overlay keeps the ratios.
+  model::FlareModel m = oneGhostModel();
+  m.channels = 3;
+  auto& p = m.ghosts[0].parameters;
+  p = {p[0], p[1], p[2], p[3], p[4], p[5], p[6], poly({1}), poly({0.5}), poly({0.2}), poly({1}), poly({0.5}),
+       poly({0.2}), p[9], p[10], p[11], p[12]};
+  std::string error;
+  ASSERT_TRUE(m.IsValid(&error)) << error;
+  Scene s = sceneWithLights({{-6, 0}});
+  const cv::Scalar sum = cv::sum(renderOverlay(m, s, s.camera.pose, {300, 200}, PredictOptions{}));
+  EXPECT_NEAR(sum[1] / sum[0], 0.5, 1e-5);
+  EXPECT_NEAR(sum[2] / sum[0], 0.2, 1e-5);
+}
+
 TEST(Prediction, OutOfRangeAndBehindLightsAddNothing) {
   const model::FlareModel m = oneGhostModel();
   const Scene s = sceneWithLights({{40, 0}, {0, 150}, {100, 0}});
