@@ -94,12 +94,16 @@ TEST(ModelRenderer, TouchesOnlyPixelsWithinReach) {
   for (int y = 0; y < image.rows; ++y)
     for (int x = 0; x < image.cols; ++x) {
       const float v = image.at<float>(y, x);
-      if (!reach.contains({x, y})) EXPECT_EQ(v, -1.0f) << x << "," << y;
+      if (!reach.contains({x, y})) {
+        EXPECT_EQ(v, -1.0f) << x << "," << y;
+      }
       if (v > -1.0f) ++lit;
       // The model is zero farther than Fo from the box, so the reach is not too tight either.
       const double dx = std::max({g.center_x - g.left - (x + 0.5), 0.0, x + 0.5 - g.center_x - g.right});
       const double dy = std::max({g.center_y - g.height - (y + 0.5), 0.0, y + 0.5 - g.center_y - g.height});
-      if (std::hypot(dx, dy) < g.outside_falloff - 0.5) EXPECT_TRUE(reach.contains({x, y}));
+      if (std::hypot(dx, dy) < g.outside_falloff - 0.5) {
+        EXPECT_TRUE(reach.contains({x, y}));
+      }
     }
   EXPECT_GT(lit, 1000);
   // A ghost far outside the region renders nothing.
