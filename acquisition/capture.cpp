@@ -189,6 +189,7 @@ Json Session::newManifest() const {
                 {"height", 0},
                 {"channels", rig_.sensor.cfa == Cfa::kMono ? "Y" : "RGB"},
                 {"pixel_pitch_um", pixel_pitch_um_},
+                {"pixel_type", options_.half_frames ? "half" : "float"},
                 {"units", rig_.camera_driver == CameraDriver::kSimulated
                               ? "relative irradiance (render units)"
                               : "electrons/s"}};
@@ -383,7 +384,14 @@ void Session::captureFrame(int index, double angle_deg) {
     entry["truth_file"] = "truth/" + name + ".exr";
   }
   // The frame last: the manifest lists a frame only after all its files are whole.
-  writeExr(out_ / ("frames/" + name + ".exr"), mergedToExr(merged, meta));
+  ExrImage frame = mergedToExr(merged, meta);
+  ExrWriteOptions frame_write;
+  if (options_.half_frames) {
+    double lo, hi;
+    cv::minMaxLoc(frame.main().reshape(1), &lo, &hi);
+    if (std::max(std::abs(lo), std::abs(hi)) < 60000) frame_write.pixel_type = ExrPixelType::kHalf;
+  }
+  writeExr(out_ / ("frames/" + name + ".exr"), frame, frame_write);
   // Device calls beyond the one move and one capture per exposure: the retries this frame took.
   entry["retries"] = attempts_ - 1 - static_cast<int>(plan_.exposures_s.size());
   manifest_["camera"]["white_level_dn"] = bracket[0].white_level;

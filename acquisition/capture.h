@@ -6,7 +6,8 @@
 //   DIR/manifest.json            the session (below); rewritten atomically after every frame
 //   DIR/frames/frame_NNNN.exr    merged HDR frame of plan angle NNNN (0-based, plan order):
 //                                  main layer "Y" (mono sensor) or "R","G","B" (Bayer sensor,
-//                                  bilinear demosaic of the merged mosaic), float32, zip;
+//                                  bilinear demosaic of the merged mosaic), float32 (half with
+//                                  --half-frames; manifest image.pixel_type), zip;
 //                                  layer "saturated": 1 where every exposure clipped (the value
 //                                  is then only a lower bound), else 0;
 //                                  attributes flarekit.angle_deg, flarekit.exposure_s (longest),
@@ -32,7 +33,8 @@
 //   camera            {description, iso, f_number, exposures_s: [...], cfa, black_level_dn,
 //                      white_level_dn, gain_e_per_dn, read_noise_e}
 //   light             description from the rig file
-//   image             {width, height, channels: "Y" | "RGB", pixel_pitch_um, units}
+//   image             {width, height, channels: "Y" | "RGB", pixel_pitch_um, units,
+//                      pixel_type: "float" | "half" (of the frames)}
 //                      units: "relative irradiance (render units)" for simulated rigs, else
 //                      "electrons/s" (merged value = electrons per second per photosite)
 //   plan              {from_deg, to_deg, step_deg, angles_deg: [...], exposures_s: [...],
@@ -85,6 +87,10 @@ struct CaptureOptions {
   bool progress = true;  // progress bar / lines on stderr (also subject to --quiet)
   // Write truth/ for simulated rigs (default true).
   bool write_truth = true;
+  // Store frames in half precision (3 significant digits; for small shareable captures such as
+  // data_synthetic/, whose noise is far above that). A frame with a value beyond the half range
+  // is stored as float anyway. Default false: float32. The EXR header says which.
+  bool half_frames = false;
 };
 
 struct CaptureSummary {

@@ -62,6 +62,9 @@ class RenderScene : public SceneProvider {
     for (auto& layer : full.layers)
       if (mono) layer.image = luminance(layer.image);
     full.attributes["flarekit.truth"] = std::string("noise-free radiance from the renderer");
+    // The lens as the rig file names it, not where this machine found it: truth files must not
+    // depend on the folder the capture ran in.
+    full.attributes["flarekit.lens_file"] = rig_.simulation.lens.string();
     return full;
   }
 

@@ -181,7 +181,7 @@ void registerCapture(CLI::App& app) {
     double from = 0, to = 0, step = 0;
     std::string exposures_text;
     int dark_frames = -1;
-    bool keep_raw = false, resume = false, no_truth = false;
+    bool keep_raw = false, resume = false, no_truth = false, half_frames = false;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -197,6 +197,8 @@ void registerCapture(CLI::App& app) {
   cmd->add_flag("--keep-raw", o->keep_raw, "Also keep the RAW exposures (raw/*.png)");
   cmd->add_flag("--resume", o->resume, "Continue the capture in --out where it stopped");
   cmd->add_flag("--no-truth", o->no_truth, "Simulated rigs: do not write truth/");
+  cmd->add_flag("--half-frames", o->half_frames,
+                "Store frames in half precision (small shareable captures)");
   cmd->callback([o, cmd] {
     const Rig rig = loadRig(findRig(o->rig));
     CapturePlan plan = CapturePlan::FromRig(rig);
@@ -213,6 +215,7 @@ void registerCapture(CLI::App& app) {
     CaptureOptions options;
     options.resume = o->resume;
     options.write_truth = !o->no_truth;
+    options.half_frames = o->half_frames;
     g_stop = false;
     installInterruptHandler();
     options.stop_requested = &g_stop;
