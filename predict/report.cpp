@@ -122,7 +122,7 @@ std::string base64(const std::vector<unsigned char>& bytes) {
 
 std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPrediction>& lights, int width_px) {
   // Room beside the disc for the labels of lights beyond the model's range (drawn on the rim).
-  const double w = width_px, legend_h = 70;
+  const double w = width_px, legend_h = 86;
   const double radius = 0.5 * w - 130, cx = 0.5 * w, cy = radius + 30;
   const double h = cy + radius + 30 + legend_h;
   std::ostringstream o;
@@ -182,7 +182,7 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
     o << cv::format("<g class=\"light-marker\"><circle cx=\"%.1f\" cy=\"%.1f\" r=\"6\" fill=\"%s\" stroke=\"#0cf\" stroke-width=\"2\"/>",
                     q.x, q.y, p.ghost_count > 0 ? "#fff" : "none")
       << cv::format("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"%s\" fill=\"#0cf\" stroke=\"#000\" "
-                    "stroke-width=\"0.3\" font-weight=\"bold\">",
+                    "stroke-width=\"3\" paint-order=\"stroke\" font-weight=\"bold\">",
                     // Inside the disc labels point inwards, on the rim outwards, so they stay on the page.
                     (q.x > cx) == inside ? q.x - 8 : q.x + 8, q.y - 8, (q.x > cx) == inside ? "end" : "start")
       << p.rank << ". " << escape(shortName(p.name)) << "<title>" << escape(p.name) << ": θ "
@@ -200,7 +200,8 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
       << fmt(scale.valueAt(k / 4.0), "%.3g") << "</text>\n";
   o << "<text x=\"" << lx << "\" y=\"" << ly + 44 << "\">" << escape(toString(map.estimator))
     << " of one light (B = " << fmt(map.brightness, "%.3g")
-    << ") placed at each direction; darkest: least flare; hollow marks: lights without ghosts</text>\n";
+    << ") placed at each direction; darkest: least flare</text>\n"
+    << "<text x=\"" << lx << "\" y=\"" << ly + 60 << "\">numbered marks: the scene's lights by rank (hollow: no ghosts)</text>\n";
   o << "</svg>\n";
   return o.str();
 }
