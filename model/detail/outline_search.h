@@ -167,10 +167,14 @@ inline double refineNearest(const PowerCubic& c, double px, double py, double lo
     else if (fp > 0)
       break;  // a minimum (f = 0 with fp ≤ 0 is a maximum, or an end where B′ = 0: go on)
     double next = (fp > 0) ? t - f / fp : lo - 1;
-    if (!(next >= lo && next <= hi)) next = 0.5 * (lo + hi);  // also catches NaN
-    const double moved = std::abs(next - t);
+    const bool newton = next >= lo && next <= hi;
+    if (!newton) next = 0.5 * (lo + hi);  // also catches NaN
+    const double moved = next - t;
     t = next;
-    if (moved < 1e-9) break;  // quadratic convergence: the error is now ~1e-18
+    // A Newton step that moves the point by less than 1e-5 px leaves an error of the order of
+    // its square (quadratic convergence): done.
+    if (newton && moved * moved * (dx * dx + dy * dy) < 1e-10) break;
+    if (std::abs(moved) < 1e-15) break;
   }
   const double bx = c.x(t) - px, by = c.y(t) - py;
   d2 = bx * bx + by * by;
