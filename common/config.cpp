@@ -194,6 +194,12 @@ ConfigNode parseJson(std::string_view text, const std::string& file) {
     auto pos = what.find("] ");
     if (pos != std::string::npos) what = what.substr(pos + 2);
     throw InputError(file + ":" + std::to_string(line) + ":" + std::to_string(col), "not valid JSON: " + what);
+  } catch (const Json::exception& e) {
+    // Other parser failures, e.g. a number too large for a double (1e999).
+    std::string what = e.what();
+    auto pos = what.find("] ");
+    if (pos != std::string::npos) what = what.substr(pos + 2);
+    throw InputError(file, "not valid JSON: " + what);
   }
   const Json* value = root.get();
   return ConfigNode(root, value, file, "");

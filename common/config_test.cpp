@@ -23,6 +23,12 @@ TEST(Config, JsonSyntaxErrorNamesFileAndLine) {
   EXPECT_NE(e.find("not valid JSON"), std::string::npos) << e;
 }
 
+TEST(Config, NumberOverflowIsBadInput) {
+  std::string e = errorOf([] { parseJson("{\"x\": 1e999}", "model.json"); });
+  EXPECT_EQ(e.rfind("model.json", 0), 0u) << e;
+  EXPECT_NE(e.find("not valid JSON"), std::string::npos) << e;
+}
+
 TEST(Config, MissingKeyAndWrongTypeNameTheKeyPath) {
   auto root = parseJson(R"({"surfaces": [{"radius": 1.5}, {"radius": "big"}]})", "lens.json");
   EXPECT_DOUBLE_EQ(root["surfaces"][0]["radius"].number(), 1.5);
