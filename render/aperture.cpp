@@ -26,14 +26,16 @@ bool ApertureShape::IsValid(std::string* error) const {
 
 Aperture::Aperture(const ApertureShape& shape) : shape_(shape) {
   if (shape.kind == ApertureKind::kPolygon) {
-    const int n = shape.blades;
+    const int n = std::clamp(shape.blades, 3, kMaxEdges);
     const double rot = shape.rotation_deg * M_PI / 180.0;
     apothem_ = static_cast<float>(std::cos(M_PI / n));
+    edges_ = n;
+    rounding_ = static_cast<float>(shape.rounding);
     for (int k = 0; k < n; ++k) {
       // Vertices at rot + 2πk/n on the unit circle; edge normals halfway between them.
       const double a = rot + M_PI / n + 2.0 * M_PI * k / n;
-      edge_nx_.push_back(static_cast<float>(std::cos(a)));
-      edge_ny_.push_back(static_cast<float>(std::sin(a)));
+      edge_nx_[k] = static_cast<float>(std::cos(a));
+      edge_ny_[k] = static_cast<float>(std::sin(a));
     }
   } else if (shape.kind == ApertureKind::kMask) {
     if (shape.mask.depth() == CV_8U)
@@ -43,24 +45,6 @@ Aperture::Aperture(const ApertureShape& shape) : shape_(shape) {
     cv::max(mask_, 0.0, mask_);
     cv::min(mask_, 1.0, mask_);
   }
-}
-
-float Aperture::signedDistance(float u, float v) const {
-  const float circle = 1.0f - std::sqrt(u * u + v * v);
-  if (shape_.kind == ApertureKind::kCircle) return circle;
-  float m = -1e30f;
-  for (size_t k = 0; k < edge_nx_.size(); ++k) m = std::max(m, u * edge_nx_[k] + v * edge_ny_[k]);
-  const float polygon = apothem_ - m;
-  const float r = static_cast<float>(shape_.rounding);
-  return (1.0f - r) * polygon + r * circle;
-}
-
-float Aperture::coverage(float u, float v, float footprint) const {
-  if (shape_.kind != ApertureKind::kMask) {
-    const float d = signedDistance(u, v);
-    return std::clamp(0.5f + d / std::max(footprint, 1e-6f), 0.0f, 1.0f);
-  }
-  return transmission(u, v);
 }
 
 float Aperture::transmission(float u, float v) const {

@@ -3,6 +3,8 @@
 // (Hullin 2011 §3.2: the aperture is applied per pixel through the interpolated aperture
 // coordinates (u, v) of each ray, normalised so the stop's semi-aperture is 1).
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -35,10 +37,27 @@ class Aperture {
   // Signed distance to the edge in aperture units (> 0 inside) for circles and polygons (with
   // rounding: the blend of the polygon's and the circle's distance functions); masks have none.
   bool hasDistance() const { return shape_.kind != ApertureKind::kMask; }
-  float signedDistance(float u, float v) const;
+  float signedDistance(float u, float v) const {
+    const float circle = 1.0f - std::sqrt(u * u + v * v);
+    if (shape_.kind == ApertureKind::kCircle) return circle;
+    float m = -1e30f;
+    for (int k = 0; k < edges_; ++k) m = std::max(m, u * edge_nx_[k] + v * edge_ny_[k]);
+    const float polygon = apothem_ - m;
+    return rounding_ == 0.0f ? polygon : (1.0f - rounding_) * polygon + rounding_ * circle;
+  }
+  // The polygon's edges (outward unit normals, distance from the centre), for culling.
+  int edgeCount() const { return edges_; }
+  float edgeNormalX(int k) const { return edge_nx_[k]; }
+  float edgeNormalY(int k) const { return edge_ny_[k]; }
+  float apothem() const { return apothem_; }
+  float rounding() const { return rounding_; }
   // Antialiased transmission for a pixel whose footprint spans `footprint` aperture units:
   // clamp(0.5 + distance / footprint, 0, 1); masks are sampled bilinearly.
-  float coverage(float u, float v, float footprint) const;
+  float coverage(float u, float v, float footprint) const {
+    if (shape_.kind == ApertureKind::kMask) return transmission(u, v);
+    const float d = signedDistance(u, v);
+    return std::clamp(0.5f + d / std::max(footprint, 1e-6f), 0.0f, 1.0f);
+  }
   // A size×size image of the transmission over [−1, 1]² (for the starburst FFT and previews).
   cv::Mat raster(int size) const;
   const ApertureShape& shape() const { return shape_; }
@@ -46,8 +65,11 @@ class Aperture {
  private:
   ApertureShape shape_;
   cv::Mat mask_;            // CV_32FC1, 0..1
-  std::vector<float> edge_nx_, edge_ny_;  // inward polygon edge normals
+  static constexpr int kMaxEdges = 32;
+  float edge_nx_[kMaxEdges] = {}, edge_ny_[kMaxEdges] = {};  // outward polygon edge normals
+  int edges_ = 0;
   float apothem_ = 1.0f;    // distance of the edges from the centre
+  float rounding_ = 0.0f;
 };
 
 }  // namespace flarekit::render

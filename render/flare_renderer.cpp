@@ -139,7 +139,7 @@ FlareImage renderFlare(const Lens& lens, const LightDirection& light,
   std::vector<std::vector<RasterTriangle>> batches;
   if (options.method == RenderMethod::kMatrix) {
     const auto t0 = Clock::now();
-    for (const Ghost& g : ghosts) addMatrixSprite(setup, g, &out.radiance);
+    addMatrixSprites(setup, ghosts, &out.radiance);
     summary.raster_ms = msSince(t0);
   } else {
     // Bundle tracing, one task per (ghost, wavelength); batch index = ghost · ns + sample.

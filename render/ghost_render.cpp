@@ -4,6 +4,7 @@
 #include <cmath>
 #include <mutex>
 
+#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
@@ -14,7 +15,7 @@ namespace flarekit::render {
 
 namespace {
 // Sub-grid sizes for the cells along discontinuous ghost edges (first level, deeper levels).
-constexpr int kRefine = 8;
+constexpr int kRefine = 4;
 constexpr int kRefineDeeper = 4;
 constexpr int kRefineDepth = 2;
 
@@ -25,7 +26,7 @@ void refineCells(const RenderSetup& setup, const CompiledPath& path, const cv::V
                  int batch, const RayGrid& grid, const TracedRays& rays, double cell_flux,
                  int depth, long long* traced, std::vector<RasterTriangle>* out) {
   std::vector<int> refine;
-  buildTriangles(rays, setup.mapping, cell_flux, weight, batch, out,
+  buildTriangles(rays, setup.mapping, setup.aperture, cell_flux, weight, batch, out,
                  depth < kRefineDepth ? &refine : nullptr);
   if (refine.empty()) return;
   const int n = grid.n;
@@ -236,18 +237,21 @@ double ghostIntensityEstimate(const RenderSetup& setup, const Ghost& ghost) {
   return t * std::min(pg.area_gain, cap);
 }
 
-void addMatrixSprite(const RenderSetup& setup, const Ghost& ghost, cv::Mat* image) {
+namespace {
+
+// One wavelength's paraxial sprite of one ghost.
+struct Sprite {
+  double cx, cy, m;  // centre (px) and signed pixels per aperture unit
+  float value;       // irradiance inside
+  cv::Vec3f weight;  // colour weight
+};
+
+std::vector<Sprite> ghostSprites(const RenderSetup& setup, const Ghost& ghost) {
   const auto path = ghostPath(setup.lens, ghost.surface_a, ghost.surface_b);
   const double wx = setup.direction[0] / setup.direction[2], wy = setup.direction[1] / setup.direction[2];
   const double pitch = setup.mapping.pixel_pitch_mm;
   const double stop = setup.lens.stopSemiAperture_mm();
-  struct Sprite {
-    double cx, cy, m;  // centre (px) and signed pixels per aperture unit
-    float value;
-    cv::Vec3f weight;
-  };
   std::vector<Sprite> sprites;
-  int x0 = image->cols, y0 = image->rows, x1 = -1, y1 = -1;
   for (const SpectralSample& s : setup.samples) {
     const ParaxialGhost pg = paraxialGhost(setup.lens, path, s.wavelength_nm);
     if (!pg.valid || pg.magnification == 0.0) continue;
@@ -256,34 +260,72 @@ void addMatrixSprite(const RenderSetup& setup, const Ghost& ghost, cv::Mat* imag
     sp.cy = setup.mapping.toPixelY(pg.center_per_slope_mm * wy);
     sp.m = pg.magnification * stop / pitch;
     if (std::abs(sp.m) < 0.5) sp.m = sp.m < 0 ? -0.5 : 0.5;  // at least a pixel across
-    // Lee & Eisemann §3.2: irradiance = T · cos θ · (pupil area / ghost area) = T cos θ / A².
-    // 1/A² with A = A1 · magnification, A1 = stop / pupil radius, magnification = m · pitch / stop.
+    // Lee & Eisemann §3.2: irradiance = T · cos θ · (pupil area / ghost area) = T cos θ / A²,
+    // with A = A1 · magnification, A1 = stop / pupil radius, magnification = m · pitch / stop.
     const double area_gain = std::pow(pg.pupil_radius_mm / (sp.m * pitch), 2.0);
     sp.value = static_cast<float>(pathTransmissionAtNormal(setup, path, s.wavelength_nm) *
                                   std::abs(setup.direction[2]) * setup.light_irradiance * area_gain);
     sp.weight = s.rgb_weight;
-    const double r = std::abs(sp.m) + 1.0;
-    x0 = std::min(x0, std::max(0, static_cast<int>(std::floor(sp.cx - r))));
-    x1 = std::max(x1, std::min(image->cols - 1, static_cast<int>(std::ceil(sp.cx + r))));
-    y0 = std::min(y0, std::max(0, static_cast<int>(std::floor(sp.cy - r))));
-    y1 = std::max(y1, std::min(image->rows - 1, static_cast<int>(std::ceil(sp.cy + r))));
     sprites.push_back(sp);
   }
-  if (sprites.empty() || x0 > x1 || y0 > y1) return;
-  for (int y = y0; y <= y1; ++y) {
-    auto* row = image->ptr<cv::Vec3f>(y);
-    for (int x = x0; x <= x1; ++x) {
-      cv::Vec3f sum(0, 0, 0);
-      for (const Sprite& sp : sprites) {
-        const float u = static_cast<float>((x + 0.5 - sp.cx) / sp.m);
-        const float v = static_cast<float>((y + 0.5 - sp.cy) / sp.m);
-        if (u * u + v * v > 1.2f) continue;
-        const float a = setup.aperture.coverage(u, v, static_cast<float>(1.0 / std::abs(sp.m)));
-        if (a > 0) sum += sp.weight * (sp.value * a);
-      }
-      row[x] += sum;
-    }
+  return sprites;
+}
+
+// Adds the sprites' pixels on row y. Inside the iris's inscribed circle (less half a pixel) the
+// sprite is flat: a constant is added over that span; only the rim band evaluates the aperture.
+void addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* image) {
+  const double r = std::abs(sp.m);
+  const double dy = y + 0.5 - sp.cy;
+  if (std::abs(dy) > r + 1.0) return;
+  const double half = std::sqrt(std::max(0.0, (r + 1.0) * (r + 1.0) - dy * dy));
+  const int x0 = std::max(0, static_cast<int>(std::floor(sp.cx - half)));
+  const int x1 = std::min(image->cols - 1, static_cast<int>(std::ceil(sp.cx + half)));
+  if (x0 > x1) return;
+  // Inner flat span: radius (apothem − half a pixel) in aperture units, for polygons and circles.
+  double inner = -1.0;
+  if (aperture.hasDistance()) {
+    const double apothem = aperture.shape().kind == ApertureKind::kCircle ? 1.0 : aperture.apothem();
+    const double rin = (apothem - 0.5 / r) * r;  // pixels
+    if (rin > 0 && std::abs(dy) < rin) inner = std::sqrt(rin * rin - dy * dy);
   }
+  int i0 = x1 + 1, i1 = x1;  // flat span [i0, i1]
+  if (inner > 0) {
+    i0 = std::max(x0, static_cast<int>(std::ceil(sp.cx - inner - 0.5)));
+    i1 = std::min(x1, static_cast<int>(std::floor(sp.cx + inner - 0.5)));
+  }
+  auto* row = image->ptr<cv::Vec3f>(y);
+  const cv::Vec3f flat = sp.weight * sp.value;
+  const float footprint = static_cast<float>(1.0 / r);
+  auto edge = [&](int x) {
+    const float u = static_cast<float>((x + 0.5 - sp.cx) / sp.m);
+    const float v = static_cast<float>(dy / sp.m);
+    const float a = aperture.coverage(u, v, footprint);
+    if (a > 0) row[x] += sp.weight * (sp.value * a);
+  };
+  if (i0 > i1) {
+    for (int x = x0; x <= x1; ++x) edge(x);
+    return;
+  }
+  for (int x = x0; x < i0; ++x) edge(x);
+  for (int x = i0; x <= i1; ++x) row[x] += flat;
+  for (int x = i1 + 1; x <= x1; ++x) edge(x);
+}
+
+}  // namespace
+
+void addMatrixSprite(const RenderSetup& setup, const Ghost& ghost, cv::Mat* image) {
+  addMatrixSprites(setup, {ghost}, image);
+}
+
+void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts, cv::Mat* image) {
+  std::vector<Sprite> sprites;
+  for (const Ghost& g : ghosts)
+    for (const Sprite& s : ghostSprites(setup, g)) sprites.push_back(s);
+  // Rows in parallel: each row sums every sprite that crosses it.
+  tbb::parallel_for(tbb::blocked_range<int>(0, image->rows, 8), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (const Sprite& s : sprites) addSpriteRow(s, setup.aperture, y, image);
+  });
 }
 
 }  // namespace flarekit::render

@@ -71,5 +71,7 @@ double pathTransmissionAtNormal(const RenderSetup& setup, const std::vector<Path
 
 // The matrix method's sprite of one ghost (all samples) added to `image`.
 void addMatrixSprite(const RenderSetup& setup, const Ghost& ghost, cv::Mat* image);
+// All ghosts' sprites, rows in parallel.
+void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts, cv::Mat* image);
 
 }  // namespace flarekit::render

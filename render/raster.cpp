@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <mutex>
 
 #include <tbb/blocked_range.h>
@@ -15,7 +16,8 @@ struct RasterVertex {
 };
 
 bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const SensorMapping& m,
-                  double cell_flux, const cv::Vec3f& weight, int batch, RasterTriangle* out) {
+                  const Aperture& aperture, double cell_flux, const cv::Vec3f& weight, int batch,
+                  RasterTriangle* out) {
   double area2 = (static_cast<double>(p1.x) - p0.x) * (static_cast<double>(p2.y) - p0.y) -
                  (static_cast<double>(p2.x) - p0.x) * (static_cast<double>(p1.y) - p0.y);
   if (area2 < 0) {
@@ -26,12 +28,30 @@ bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const Senso
   const float min_x = std::min({p0.x, p1.x, p2.x}), max_x = std::max({p0.x, p1.x, p2.x});
   const float min_y = std::min({p0.y, p1.y, p2.y}), max_y = std::max({p0.y, p1.y, p2.y});
   RasterTriangle& t = *out;
-  // Pixel centres (i + 0.5) inside [min, max].
-  t.x0 = std::max(0, static_cast<int>(std::ceil(min_x - 0.5f)));
-  t.x1 = std::min(m.width_px - 1, static_cast<int>(std::floor(max_x - 0.5f)));
-  t.y0 = std::max(0, static_cast<int>(std::ceil(min_y - 0.5f)));
-  t.y1 = std::min(m.height_px - 1, static_cast<int>(std::floor(max_y - 0.5f)));
+  // Triangles smaller than kSplatArea pixels are splatted (see rasterizeInto): their box is the
+  // pixels they touch. Larger ones are sampled at pixel centres (i + 0.5) inside [min, max].
+  t.splat = area2 < 2.0 * kSplatArea;
+  if (!(max_x - min_x < 1e5f && max_y - min_y < 1e5f)) return false;
+  if (t.splat) {
+    if (max_x < 0 || max_y < 0 || min_x >= m.width_px || min_y >= m.height_px) return false;
+    t.x0 = std::max(0, static_cast<int>(std::floor(min_x)));
+    t.x1 = std::min(m.width_px - 1, static_cast<int>(std::floor(max_x)));
+    t.y0 = std::max(0, static_cast<int>(std::floor(min_y)));
+    t.y1 = std::min(m.height_px - 1, static_cast<int>(std::floor(max_y)));
+  } else {
+    t.x0 = std::max(0, static_cast<int>(std::ceil(std::max(min_x, -1.0f) - 0.5f)));
+    t.x1 = std::min(m.width_px - 1, static_cast<int>(std::floor(std::min(max_x, m.width_px + 1.0f) - 0.5f)));
+    t.y0 = std::max(0, static_cast<int>(std::ceil(std::max(min_y, -1.0f) - 0.5f)));
+    t.y1 = std::min(m.height_px - 1, static_cast<int>(std::floor(std::min(max_y, m.height_px + 1.0f) - 0.5f)));
+  }
   if (t.x0 > t.x1 || t.y0 > t.y1) return false;
+  t.px[0] = p0.x;
+  t.px[1] = p1.x;
+  t.px[2] = p2.x;
+  t.py[0] = p0.y;
+  t.py[1] = p1.y;
+  t.py[2] = p2.y;
+  t.area_px = static_cast<float>(0.5 * area2);
   t.ox = p0.x;
   t.oy = p0.y;
   const RasterVertex* p[3] = {&p0, &p1, &p2};
@@ -58,6 +78,29 @@ bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const Senso
   t.aperture_footprint =
       std::max(1e-6f, std::sqrt(0.5f * (t.ux * t.ux + t.uy * t.uy + t.vx * t.vx + t.vy * t.vy)));
   t.rim_footprint = std::max(1e-6f, std::sqrt(t.rx * t.rx + t.ry * t.ry));
+  // Culling and the interior fast path. r_rel is linear over the triangle: past 1 + half a
+  // footprint at every corner means dark everywhere.
+  const float rim_out = 1.0f + 0.5f * t.rim_footprint, rim_in = 1.0f - 0.5f * t.rim_footprint;
+  if (p0.r >= rim_out && p1.r >= rim_out && p2.r >= rim_out) return false;
+  bool interior = p0.r <= rim_in && p1.r <= rim_in && p2.r <= rim_in;
+  if (aperture.hasDistance()) {
+    const float half = 0.5f * t.aperture_footprint;
+    // Beyond one straight blade edge at every corner: outside the (convex) iris everywhere.
+    if (aperture.shape().kind == ApertureKind::kPolygon && aperture.rounding() == 0.0f)
+      for (int k = 0; k < aperture.edgeCount(); ++k) {
+        const float nx = aperture.edgeNormalX(k), ny = aperture.edgeNormalY(k);
+        const float limit = aperture.apothem() + half;
+        if (p0.u * nx + p0.v * ny >= limit && p1.u * nx + p1.v * ny >= limit &&
+            p2.u * nx + p2.v * ny >= limit)
+          return false;
+      }
+    interior = interior && aperture.signedDistance(p0.u, p0.v) >= half &&
+               aperture.signedDistance(p1.u, p1.v) >= half &&
+               aperture.signedDistance(p2.u, p2.v) >= half;
+  } else {
+    interior = false;
+  }
+  t.interior = interior;
   // Flux of the triangle's pupil area spread over its sensor area (Hullin 2011 §3.2: intensity
   // from the area ratio of the ray-grid cells), in relative irradiance.
   const double scale = cell_flux / (area2 * m.pixel_pitch_mm * m.pixel_pitch_mm);
@@ -86,19 +129,151 @@ inline bool inside(const RasterTriangle& t, float dx, float dy) {
   return true;
 }
 
-// Adds triangle `t` to `buffer` (CV_32FC3 covering pixels [bx, bx + cols) × [by, by + rows)),
-// restricted to pixel columns [x0, x1] and rows [y0, y1].
+// Planar RGB accumulation buffer covering pixels [bx, bx + stride) × [by, by + rows).
+struct Planes {
+  float* r;
+  float* g;
+  float* b;
+  int stride, bx, by;
+};
+
+// Adds triangle `t` to `p`, restricted to pixel columns [x0, x1] and rows [y0, y1]. Per row, the
+// span where the edge functions can be ≥ 0 is solved for (one pixel wider than exact); the exact
+// top-left test then decides each pixel, the same way in every caller.
 inline void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, int x1,
-                          int y0, int y1, cv::Mat& buffer, int bx, int by) {
+                          int y0, int y1, const Planes& p) {
+  const float wr = t.weight[0], wg = t.weight[1], wb = t.weight[2];
+  if (t.splat) {
+    // A triangle below kSplatArea pixels may cover no pixel centre at all, or one by chance, so
+    // point sampling would lose or multiply its flux (caustics are made of such triangles).
+    // Instead its flux goes to the pixels under k² points spread evenly over it, each carrying
+    // its share with the transmission, iris and rims at that point — as a dense ray grid would.
+    const float edge = std::max({std::abs(t.px[1] - t.px[0]) + std::abs(t.py[1] - t.py[0]),
+                                 std::abs(t.px[2] - t.px[1]) + std::abs(t.py[2] - t.py[1]),
+                                 std::abs(t.px[0] - t.px[2]) + std::abs(t.py[0] - t.py[2])});
+    const int k = std::clamp(static_cast<int>(std::ceil(2.0f * edge)), 1, 16);
+    const float share = t.area_px / static_cast<float>(k * k);
+    for (int a = 0; a < k; ++a)
+      for (int b = 0; b < k; ++b) {
+        // The unit square folded onto the triangle: uniform points.
+        float s1 = (a + 0.5f) / k, s2 = (b + 0.5f) / k;
+        if (s1 + s2 > 1.0f) {
+          s1 = 1.0f - s1;
+          s2 = 1.0f - s2;
+        }
+        const float x = t.px[0] + s1 * (t.px[1] - t.px[0]) + s2 * (t.px[2] - t.px[0]);
+        const float y = t.py[0] + s1 * (t.py[1] - t.py[0]) + s2 * (t.py[2] - t.py[0]);
+        const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
+        if (ix < x0 || ix > x1 || iy < y0 || iy > y1) continue;
+        const float dx = x - t.ox, dy = y - t.oy;
+        if (t.r0 + t.rx * dx + t.ry * dy > 1.0f) continue;
+        const float ap = aperture.transmission(t.u0 + t.ux * dx + t.uy * dy, t.v0 + t.vx * dx + t.vy * dy);
+        const float tr = std::max(0.0f, t.t0 + t.tx * dx + t.ty * dy);
+        const float v = share * ap * tr;
+        const size_t i = static_cast<size_t>(iy - p.by) * static_cast<size_t>(p.stride) +
+                         static_cast<size_t>(ix - p.bx);
+        p.r[i] += wr * v;
+        p.g[i] += wg * v;
+        p.b[i] += wb * v;
+      }
+    return;
+  }
   for (int y = y0; y <= y1; ++y) {
     const float dy = (y + 0.5f) - t.oy;
-    auto* row = buffer.ptr<cv::Vec3f>(y - by);
-    for (int x = x0; x <= x1; ++x) {
-      const float dx = (x + 0.5f) - t.ox;
-      if (!inside(t, dx, dy)) continue;
-      const float s = shade(t, aperture, dx, dy);
-      if (s > 0.0f) row[x - bx] += t.weight * s;
+    float base[3];
+    float lo = static_cast<float>(x0), hi = static_cast<float>(x1);
+    bool empty = false;
+    for (int k = 0; k < 3; ++k) {
+      base[k] = t.eb[k] * dy + t.ec[k];
+      const float a = t.ea[k];
+      if (a > 0.0f)
+        lo = std::max(lo, t.ox - 0.5f - base[k] / a);
+      else if (a < 0.0f)
+        hi = std::min(hi, t.ox - 0.5f - base[k] / a);
+      else if (base[k] < 0.0f || (base[k] == 0.0f && !t.top_left[k]))
+        empty = true;
     }
+    if (empty || !(lo <= hi + 2.0f)) continue;
+    const int xs = std::max(x0, static_cast<int>(std::floor(lo)) - 1);
+    const int xe = std::min(x1, static_cast<int>(std::ceil(hi)) + 1);
+    const size_t row = static_cast<size_t>(y - p.by) * static_cast<size_t>(p.stride);
+    float* __restrict__ R = p.r + row - p.bx;
+    float* __restrict__ G = p.g + row - p.bx;
+    float* __restrict__ B = p.b + row - p.bx;
+    const bool tl0 = t.top_left[0], tl1 = t.top_left[1], tl2 = t.top_left[2];
+    const float a0 = t.ea[0], a1 = t.ea[1], a2 = t.ea[2];
+    const float b0 = base[0], b1 = base[1], b2 = base[2];
+    const float trow = t.t0 + t.ty * dy, tx = t.tx;
+    if (t.interior) {
+      // A = C = 1: only the interpolated transmission. The top-left test is folded into one
+      // threshold per edge (e > 0 is e ≥ the smallest denormal) so the loop is branch-free and
+      // vectorises.
+      const float th0 = tl0 ? 0.0f : std::numeric_limits<float>::denorm_min();
+      const float th1 = tl1 ? 0.0f : std::numeric_limits<float>::denorm_min();
+      const float th2 = tl2 ? 0.0f : std::numeric_limits<float>::denorm_min();
+#pragma GCC ivdep
+      for (int i = 0; i <= xe - xs; ++i) {
+        // The same expression as everywhere else, so that every caller decides ties alike.
+        const float dx = (static_cast<float>(xs + i) + 0.5f) - t.ox;
+        const float e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
+        const float in = static_cast<float>((e0 >= th0) & (e1 >= th1) & (e2 >= th2));
+        const float tr = trow + tx * dx;
+        const float v = in * (tr > 0.0f ? tr : 0.0f);
+        R[xs + i] += wr * v;
+        G[xs + i] += wg * v;
+        B[xs + i] += wb * v;
+      }
+      continue;
+    }
+    for (int x = xs; x <= xe; ++x) {
+      const float dx = (x + 0.5f) - t.ox;
+      const float e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
+      const bool in = (e0 > 0.0f || (tl0 && e0 == 0.0f)) && (e1 > 0.0f || (tl1 && e1 == 0.0f)) &&
+                      (e2 > 0.0f || (tl2 && e2 == 0.0f));
+      if (!in) continue;
+      const float s = shade(t, aperture, dx, dy);
+      R[x] += wr * s;
+      G[x] += wg * s;
+      B[x] += wb * s;
+    }
+  }
+}
+
+// Adds planar buffers into an interleaved CV_32FC3 image region.
+void addPlanes(const std::vector<float>& r, const std::vector<float>& g, const std::vector<float>& b,
+               int x0, int y0, int w, int h, cv::Mat* image) {
+  for (int y = 0; y < h; ++y) {
+    auto* dst = image->ptr<cv::Vec3f>(y0 + y) + x0;
+    const size_t o = static_cast<size_t>(y) * static_cast<size_t>(w);
+    for (int x = 0; x < w; ++x) {
+      dst[x][0] += r[o + static_cast<size_t>(x)];
+      dst[x][1] += g[o + static_cast<size_t>(x)];
+      dst[x][2] += b[o + static_cast<size_t>(x)];
+    }
+  }
+}
+
+// One batch into its own planar buffer over its bounding box, then added to `image`.
+void rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& aperture,
+                    cv::Mat* image, std::mutex* mutex) {
+  if (tris.empty()) return;
+  int x0 = image->cols, y0 = image->rows, x1 = -1, y1 = -1;
+  for (const RasterTriangle& t : tris) {
+    x0 = std::min(x0, t.x0);
+    y0 = std::min(y0, t.y0);
+    x1 = std::max(x1, t.x1);
+    y1 = std::max(y1, t.y1);
+  }
+  const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+  const size_t size = static_cast<size_t>(w) * static_cast<size_t>(h);
+  std::vector<float> r(size, 0.0f), g(size, 0.0f), b(size, 0.0f);
+  const Planes p{r.data(), g.data(), b.data(), w, x0, y0};
+  for (const RasterTriangle& t : tris) rasterizeInto(t, aperture, t.x0, t.x1, t.y0, t.y1, p);
+  if (mutex) {
+    std::lock_guard<std::mutex> lock(*mutex);
+    addPlanes(r, g, b, x0, y0, w, h, image);
+  } else {
+    addPlanes(r, g, b, x0, y0, w, h, image);
   }
 }
 
@@ -118,9 +293,9 @@ float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, 
   return shade(t, aperture, dx, dy);
 }
 
-void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double cell_flux,
-                    const cv::Vec3f& weight, int batch, std::vector<RasterTriangle>* out,
-                    std::vector<int>* refine) {
+void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const Aperture& aperture,
+                    double cell_flux, const cv::Vec3f& weight, int batch,
+                    std::vector<RasterTriangle>* out, std::vector<int>* refine) {
   const int n = rays.n;
   auto vertex = [&](int i, int j) {
     const size_t k = static_cast<size_t>(j * n + i);
@@ -130,6 +305,37 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double
   };
   auto valid = [&](size_t k) {
     return rays.r_rel[k] <= 1.0f && rays.u[k] * rays.u[k] + rays.v[k] * rays.v[k] <= 1.0f;
+  };
+  // Orientation of each quad's two triangles on the sensor (+1, −1, 0 = mixed or degenerate):
+  // where the pupil-to-sensor map folds (a caustic), linear interpolation across the fold is
+  // wrong, so those quads and their neighbours are refined too.
+  std::vector<int8_t> orientation;
+  if (refine) {
+    orientation.assign(static_cast<size_t>(n) * static_cast<size_t>(n), 0);
+    for (int j = 0; j + 1 < n; ++j)
+      for (int i = 0; i + 1 < n; ++i) {
+        const size_t k00 = static_cast<size_t>(j * n + i), k10 = k00 + 1;
+        const size_t k01 = k00 + static_cast<size_t>(n), k11 = k01 + 1;
+        if (!rays.alive[k00] || !rays.alive[k10] || !rays.alive[k01] || !rays.alive[k11]) continue;
+        auto cross = [&](size_t a, size_t b, size_t c) {
+          return (rays.x_mm[b] - rays.x_mm[a]) * (rays.y_mm[c] - rays.y_mm[a]) -
+                 (rays.x_mm[c] - rays.x_mm[a]) * (rays.y_mm[b] - rays.y_mm[a]);
+        };
+        const float s1 = cross(k00, k10, k11), s2 = cross(k00, k11, k01);
+        orientation[k00] = (s1 > 0 && s2 > 0) ? 1 : (s1 < 0 && s2 < 0) ? -1 : 0;
+      }
+  }
+  auto folded = [&](int i, int j) {
+    const int8_t o = orientation[static_cast<size_t>(j * n + i)];
+    if (o == 0) return true;
+    const int di[4] = {1, -1, 0, 0}, dj[4] = {0, 0, 1, -1};
+    for (int d = 0; d < 4; ++d) {
+      const int a = i + di[d], b = j + dj[d];
+      if (a < 0 || b < 0 || a + 1 >= n || b + 1 >= n) continue;
+      const int8_t q = orientation[static_cast<size_t>(b * n + a)];
+      if (q != 0 && q != o) return true;
+    }
+    return false;
   };
   RasterTriangle t;
   for (int j = 0; j + 1 < n; ++j)
@@ -146,15 +352,16 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double
         r_max = std::max(r_max, rays.r_rel[c]);
       }
       if (!any_valid) continue;
-      if (refine && (!all_alive || (r_min <= 1.0f && r_max > 1.0f && r_max - r_min > kRefineJump))) {
+      if (refine && (!all_alive || (r_min <= 1.0f && r_max > 1.0f && r_max - r_min > kRefineJump) ||
+                     folded(i, j))) {
         refine->push_back(j * n + i);
         continue;
       }
       if (!all_alive) continue;
       const RasterVertex v00 = vertex(i, j), v10 = vertex(i + 1, j);
       const RasterVertex v01 = vertex(i, j + 1), v11 = vertex(i + 1, j + 1);
-      if (makeTriangle(v00, v10, v11, mapping, cell_flux, weight, batch, &t)) out->push_back(t);
-      if (makeTriangle(v00, v11, v01, mapping, cell_flux, weight, batch, &t)) out->push_back(t);
+      if (makeTriangle(v00, v10, v11, mapping, aperture, cell_flux, weight, batch, &t)) out->push_back(t);
+      if (makeTriangle(v00, v11, v01, mapping, aperture, cell_flux, weight, batch, &t)) out->push_back(t);
     }
 }
 
@@ -162,32 +369,17 @@ void rasterizeBatches(const std::vector<std::vector<RasterTriangle>>& batches,
                       const std::vector<bool>* keep, const Aperture& aperture, cv::Mat* image) {
   for (size_t b = 0; b < batches.size(); ++b) {
     if (keep && !(*keep)[b]) continue;
-    for (const RasterTriangle& t : batches[b])
-      rasterizeInto(t, aperture, t.x0, t.x1, t.y0, t.y1, *image, 0, 0);
+    rasterizeBatch(batches[b], aperture, image, nullptr);
   }
 }
 
 void rasterizePerGhost(const std::vector<std::vector<RasterTriangle>>& batches,
                        const Aperture& aperture, cv::Mat* image) {
+  // Hullin's one-ghost-at-a-time pass: each batch into its own buffer over its bounding box,
+  // blended additively into the frame (parallel over batches).
   std::mutex mutex;
-  tbb::parallel_for(size_t{0}, batches.size(), [&](size_t b) {
-    const auto& tris = batches[b];
-    if (tris.empty()) return;
-    int x0 = image->cols, y0 = image->rows, x1 = -1, y1 = -1;
-    for (const RasterTriangle& t : tris) {
-      x0 = std::min(x0, t.x0);
-      y0 = std::min(y0, t.y0);
-      x1 = std::max(x1, t.x1);
-      y1 = std::max(y1, t.y1);
-    }
-    // The ghost's own buffer over its bounding box (Hullin's one-ghost-at-a-time pass), then
-    // blended additively into the frame.
-    cv::Mat buffer(y1 - y0 + 1, x1 - x0 + 1, CV_32FC3, cv::Scalar::all(0));
-    for (const RasterTriangle& t : tris) rasterizeInto(t, aperture, t.x0, t.x1, t.y0, t.y1, buffer, x0, y0);
-    std::lock_guard<std::mutex> lock(mutex);
-    cv::Mat roi = (*image)(cv::Rect(x0, y0, buffer.cols, buffer.rows));
-    roi += buffer;
-  });
+  tbb::parallel_for(size_t{0}, batches.size(),
+                    [&](size_t b) { rasterizeBatch(batches[b], aperture, image, &mutex); });
 }
 
 void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
@@ -229,31 +421,40 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
     }
   });
   // Level 2 and accumulation, one coarse tile per task: each fine tile keeps the triangles that
-  // overlap it and sums them pixel by pixel in a tile-local buffer written once.
+  // overlap it and sums them in a tile-local planar buffer (in cache), written to the frame once.
   tbb::parallel_for(0, tiles, [&](int tile) {
     const int cx = tile % ncx, cy = tile / ncx;
     const size_t begin = start[static_cast<size_t>(tile)], end = start[static_cast<size_t>(tile) + 1];
     if (begin == end) return;
     std::vector<const RasterTriangle*> fine;
-    cv::Mat acc(F, F, CV_32FC3);
+    const size_t area = static_cast<size_t>(F) * static_cast<size_t>(F);
+    std::vector<float> r(area), g(area), b(area);
     for (int fy = cy * C; fy < std::min(H, (cy + 1) * C); fy += F)
       for (int fx = cx * C; fx < std::min(W, (cx + 1) * C); fx += F) {
         const int fx1 = std::min(W, fx + F) - 1, fy1 = std::min(H, fy + F) - 1;
         fine.clear();
-        for (size_t r = begin; r < end; ++r) {
-          const RasterTriangle& t = batches[refs[r].batch][refs[r].index];
+        for (size_t k = begin; k < end; ++k) {
+          const RasterTriangle& t = batches[refs[k].batch][refs[k].index];
           if (t.x1 < fx || t.x0 > fx1 || t.y1 < fy || t.y0 > fy1) continue;
           fine.push_back(&t);
         }
         if (fine.empty()) continue;
-        acc.setTo(cv::Scalar::all(0));
+        std::fill(r.begin(), r.end(), 0.0f);
+        std::fill(g.begin(), g.end(), 0.0f);
+        std::fill(b.begin(), b.end(), 0.0f);
+        const Planes p{r.data(), g.data(), b.data(), F, fx, fy};
         for (const RasterTriangle* t : fine)
-          rasterizeInto(*t, aperture, std::max(t->x0, fx), std::min(t->x1, fx1),
-                        std::max(t->y0, fy), std::min(t->y1, fy1), acc, fx, fy);
+          rasterizeInto(*t, aperture, std::max(t->x0, fx), std::min(t->x1, fx1), std::max(t->y0, fy),
+                        std::min(t->y1, fy1), p);
         for (int y = fy; y <= fy1; ++y) {
           auto* dst = image->ptr<cv::Vec3f>(y);
-          const auto* src = acc.ptr<cv::Vec3f>(y - fy);
-          for (int x = fx; x <= fx1; ++x) dst[x] += src[x - fx];
+          const size_t o = static_cast<size_t>(y - fy) * static_cast<size_t>(F);
+          for (int x = fx; x <= fx1; ++x) {
+            const size_t i = o + static_cast<size_t>(x - fx);
+            dst[x][0] += r[i];
+            dst[x][1] += g[i];
+            dst[x][2] += b[i];
+          }
         }
       }
   });

@@ -5,6 +5,8 @@
 //   irradiance = T · (pupil area of the triangle / its sensor area) · A(u, v) · C(r_rel)
 // with T, (u, v) and r_rel interpolated linearly over the triangle, A the aperture (antialiased
 // over one pixel footprint) and C = clamp(0.5 + (1 − r_rel)/footprint) the rim vignetting.
+// Triangles smaller than a pixel (caustics, distant ghosts) are splatted instead: their flux goes
+// to the pixels under points spread over them, so none is lost between pixel centres.
 // Both rasterizers below call the same per-pixel function, so they give the same image up to
 // the order of floating-point additions.
 
@@ -17,6 +19,9 @@
 
 namespace flarekit::render {
 
+// Triangles smaller than this (in pixels) are splatted rather than point-sampled.
+inline constexpr float kSplatArea = 1.0f;
+
 struct RasterTriangle {
   float ox = 0, oy = 0;            // origin (first vertex), pixel coordinates
   float ea[3], eb[3], ec[3];       // edge functions e = a·(x−ox) + b·(y−oy) + c, ≥ 0 inside
@@ -27,6 +32,14 @@ struct RasterTriangle {
   float aperture_footprint;        // aperture units spanned by one pixel
   float rim_footprint;             // r_rel units spanned by one pixel
   cv::Vec3f weight;                // colour weight × E_in × pupil area / sensor area
+  // Every point lies inside the aperture and the rims by at least half a pixel footprint
+  // (the distance functions are concave, so checking the corners suffices): A = C = 1.
+  bool interior;
+  // Below kSplatArea pixels the triangle's flux is splatted over points inside it instead of
+  // sampled at pixel centres; its corners (pixels) and area are kept for that.
+  bool splat;
+  float px[3], py[3];
+  float area_px;
   int x0, y0, x1, y1;              // pixel bounding box, inclusive, clipped to the image
   int batch;                       // which (ghost, wavelength) it came from
 };
@@ -44,13 +57,15 @@ struct SensorMapping {
 // corner are skipped; so are quads whose four corners all lie outside the ghost (r_rel > 1 or
 // |(u, v)| > 1), as in Bodonyi & Kunkli §4.1. Appends to `out`.
 // When `refine` is given, quads across a discontinuous edge — a dead corner next to a valid one,
-// or r_rel crossing 1 with a jump of more than kRefineJump within the quad (rays turning
-// grazing) — are left out and their indices (j·n + i of the quad's first corner) appended to it,
+// r_rel crossing 1 with a jump of more than kRefineJump within the quad (rays turning grazing),
+// or a fold of the map (a caustic: the quad's orientation on the sensor is mixed or differs from
+// a neighbour's) — are left out and their indices (j·n + i of the quad's first corner) appended to it,
 // for the caller to trace more finely.
-inline constexpr float kRefineJump = 0.1f;
-void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, double cell_flux,
-                    const cv::Vec3f& weight, int batch, std::vector<RasterTriangle>* out,
-                    std::vector<int>* refine = nullptr);
+inline constexpr float kRefineJump = 0.3f;
+// Triangles entirely outside a rim or a straight iris edge are dropped.
+void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const Aperture& aperture,
+                    double cell_flux, const cv::Vec3f& weight, int batch,
+                    std::vector<RasterTriangle>* out, std::vector<int>* refine = nullptr);
 
 // Value (before the colour weight) of a triangle at pixel centre (x, y), 0 outside it.
 float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, float y);
