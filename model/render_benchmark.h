@@ -33,8 +33,13 @@ std::vector<GhostParameters> benchmarkGhosts(const RenderBenchmarkOptions& optio
 
 struct RenderBenchmarkResult {
   int ghosts = 0, width = 0, height = 0, channels = 0, threads = 0, repeats = 0;
-  double ms_render = 0;                    // all ghosts, full frame (median)
+  double ms_render = 0;                    // all ghosts, full frame (median wall-clock time)
   double ms_render_with_derivatives = 0;   // all ghosts, full frame, every derivative image
+  // CPU time of the whole process per run (all threads; mean over the timed runs): what the work
+  // costs regardless of other load on the machine. On an idle machine with N cores the wall-clock
+  // time approaches cpu_ms / N.
+  double cpu_ms_render = 0;
+  double cpu_ms_render_with_derivatives = 0;
   double pixels_per_s = 0;                 // frame pixels per second of ms_render
   double ghost_pixels = 0;                 // Σ pixels within the ghosts' reach, clipped to the frame
   double ghost_pixels_per_s = 0;           // ghost_pixels per second of ms_render
