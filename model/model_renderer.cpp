@@ -332,14 +332,23 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
             detail::Candidate hint;
             bool has_hint = false;
+            double last_d = 0;  // the last exact distance in this row, at x = last_x
+            int last_x = 0;
+            bool has_last = false;
             for (int x = bx; x < bx + bw; ++x, out += channels) {
               const cv::Point2d p(x + 0.5, y + 0.5);
               int pixel_mode = mode;
               if (mode == 0 && bw * bh > 1) {
-                // The same bounds per pixel, with its own distance from the centre.
+                // The same bounds per pixel, with its own distance from the centre, and from the
+                // last pixel of the row whose distance is known exactly (d is 1-Lipschitz).
                 const double r = std::sqrt((p.x - centre.x) * (p.x - centre.x) + (p.y - centre.y) * (p.y - centre.y)) * inv_scale;
                 if (ec.d + r <= -g.inside_falloff) pixel_mode = 1;
                 else if (ec.d - r >= g.outside_falloff) continue;
+                if (has_last && pixel_mode == 0) {
+                  const double step = (x - last_x) * inv_scale;
+                  if (last_d + step <= -g.inside_falloff) pixel_mode = 1;
+                  else if (last_d - step >= g.outside_falloff) continue;
+                }
               }
               if (pixel_mode == 1) {
                 for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(g.inside[c]);
@@ -355,6 +364,9 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               if (pieces.certified) {
                 evalDistanceInBlock(pg.shape, pieces, q, dopt.newton_steps, hint, has_hint, e);
                 has_hint = true;
+                last_d = e.d;  // exact: the block search has no cutoff
+                last_x = x;
+                has_last = true;
               } else
                 evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
               shadeGhost(g, pg.shape, e, values, deriv ? jac.data() : nullptr);
