@@ -183,9 +183,9 @@ void registerSimulate(CLI::App& app) {
     const FlareImage image = renderFlare(lens, LightDirection{o->angle, o->roll}, r);
     writeExr(o->out, toExrImage(image));
     if (!o->preview.empty()) {
-      // Expose for the ghosts (the light's own image is orders of magnitude brighter).
+      // Automatic exposure on the 90th percentile of the lit pixels: those are the ghosts, which
+      // cover far more pixels than the light's own image (orders of magnitude brighter, clipped).
       PreviewOptions preview;
-      preview.key_percentile = 99.0;
       writePreviewPng(o->preview, image.radiance, preview);
     }
     logInfo(image.summary.BriefReport());

@@ -24,6 +24,14 @@ cv::Mat starburstPattern(const Aperture& aperture, int fft_size) {
   power(cv::Rect(h, 0, fft_size - h, h)).copyTo(shifted(cv::Rect(0, h, fft_size - h, h)));
   power(cv::Rect(0, h, h, fft_size - h)).copyTo(shifted(cv::Rect(h, 0, h, fft_size - h)));
   power(cv::Rect(h, h, fft_size - h, fft_size - h)).copyTo(shifted(cv::Rect(0, 0, fft_size - h, fft_size - h)));
+  // The DFT is periodic: spikes reaching the border would wrap round. A radial window fading to
+  // zero at the border keeps the pattern a single, round starburst.
+  for (int y = 0; y < fft_size; ++y)
+    for (int x = 0; x < fft_size; ++x) {
+      const double r = std::hypot(x - h, y - h) / h;
+      const double w = r < 1.0 ? (1.0 - r * r) * (1.0 - r * r) : 0.0;
+      shifted.at<float>(y, x) *= static_cast<float>(w);
+    }
   const double sum = cv::sum(shifted)[0];
   if (sum > 0) shifted /= sum;
   return shifted;
