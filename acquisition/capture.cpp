@@ -446,6 +446,17 @@ CaptureSummary Session::run() {
       manifest_["frames"].push_back(f);
     }
     summary_.frames_already_done = static_cast<int>(done.size());
+    // A capture killed while writing leaves at worst hidden ".<name>.tmp-XXXXXX<ext>" files of
+    // the atomic writes (common/atomic_file.h); they belong to no frame: remove them.
+    std::error_code ec;
+    std::vector<fs::path> stray;
+    for (auto it = fs::recursive_directory_iterator(out_, ec); !ec && it != fs::end(it);
+         it.increment(ec)) {
+      const std::string n = it->path().filename().string();
+      if (it->is_regular_file() && n.size() > 1 && n[0] == '.' && n.find(".tmp-") != std::string::npos)
+        stray.push_back(it->path());
+    }
+    for (const auto& p : stray) fs::remove(p, ec);
     logInfo("Resuming " + out_.string() + ": " + std::to_string(done.size()) + " of " +
             std::to_string(angles_.size()) + " frames done");
   } else {

@@ -99,6 +99,8 @@ class TicBench : public ::testing::Test {
     g_signal_connect(handler_, "handle-ioctl", G_CALLBACK(&TicBench::onIoctl), this);
   }
   void TearDown() override {
+    for (UMockdevIoctlData* d : done_) umockdev_ioctl_data_unref(d);
+    done_.clear();
     g_clear_object(&handler_);
     g_clear_object(&testbed_);
   }
