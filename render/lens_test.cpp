@@ -151,32 +151,39 @@ TEST_P(LensRejects, WithOneClearLine) {
 }
 
 #define SURF(r, t, n, h) "{\"radius\": " #r ", \"thickness\": " #t ", \"ior\": " #n ", \"semi_aperture\": " #h "}"
-#define STOP "{\"radius\": 0, \"thickness\": 2, \"ior\": 1.0, \"semi_aperture\": 5, \"is_stop\": true}"
+#define STOP "{\"radius\": 0, \"thickness\": 40, \"ior\": 1.0, \"semi_aperture\": 5, \"is_stop\": true}"
+#define BACK SURF(-50, 2, 1.0, 10)
 
 INSTANTIATE_TEST_SUITE_P(
     BadFiles, LensRejects,
     ::testing::Values(
         BadLens{"no stop", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," SURF(-50, 40, 1.0, 10) "]}", "stop"},
-        BadLens{"two stops", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," STOP "," STOP "," SURF(-50, 40, 1.0, 10) "]}", "2 stops"},
-        BadLens{"negative thickness", "{\"surfaces\": [" SURF(50, -5, 1.5, 10) "," STOP "," SURF(-50, 40, 1.0, 10) "]}", "surfaces[0]: thickness"},
+        BadLens{"two stops", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," BACK "," STOP "," STOP "]}", "2 stops"},
+        BadLens{"negative thickness", "{\"surfaces\": [" SURF(50, -5, 1.5, 10) "," BACK "," STOP "]}", "surfaces[0]: thickness"},
         BadLens{"NaN", "{\"surfaces\": [{\"radius\": NaN, \"thickness\": 5, \"ior\": 1.5, \"semi_aperture\": 10}]}", "syntax error"},
-        BadLens{"infinite", "{\"surfaces\": [" SURF(1e999, 5, 1.5, 10) "," STOP "," SURF(-50, 40, 1.0, 10) "]}", "radius"},
-        BadLens{"semi-aperture above radius", "{\"surfaces\": [" SURF(8, 5, 1.5, 10) "," STOP "," SURF(-50, 40, 1.0, 10) "]}", "surfaces[0]: semi_aperture"},
-        BadLens{"zero semi-aperture", "{\"surfaces\": [" SURF(50, 5, 1.5, 0) "," STOP "," SURF(-50, 40, 1.0, 10) "]}", "semi_aperture must be > 0"},
-        BadLens{"radius as text", "{\"surfaces\": [{\"radius\": \"fifty\", \"thickness\": 5, \"ior\": 1.5, \"semi_aperture\": 10}," STOP "," SURF(-50, 40, 1.0, 10) "]}", "surfaces[0].radius: must be a number"},
-        BadLens{"stop flag as number", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) ",{\"radius\": 0, \"thickness\": 2, \"semi_aperture\": 5, \"is_stop\": 1}," SURF(-50, 40, 1.0, 10) "]}", "is_stop"},
-        BadLens{"unknown surface key", "{\"surfaces\": [{\"radius\": 50, \"thickness\": 5, \"ior\": 1.5, \"semi_aperture\": 10, \"thicknes\": 3}," STOP "," SURF(-50, 40, 1.0, 10) "]}", "thicknes"},
+        BadLens{"infinite", "{\"surfaces\": [" SURF(1e999, 5, 1.5, 10) "," BACK "," STOP "]}", "overflow"},
+        BadLens{"semi-aperture above radius", "{\"surfaces\": [" SURF(8, 5, 1.5, 10) "," BACK "," STOP "]}", "surfaces[0]: semi_aperture"},
+        BadLens{"zero semi-aperture", "{\"surfaces\": [" SURF(50, 5, 1.5, 0) "," BACK "," STOP "]}", "semi_aperture must be > 0"},
+        BadLens{"radius as text", "{\"surfaces\": [{\"radius\": \"fifty\", \"thickness\": 5, \"ior\": 1.5, \"semi_aperture\": 10}," BACK "," STOP "]}", "surfaces[0].radius: must be a number"},
+        BadLens{"stop flag as number", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," BACK ",{\"radius\": 0, \"thickness\": 2, \"semi_aperture\": 5, \"is_stop\": 1}]}", "is_stop"},
+        BadLens{"unknown surface key", "{\"surfaces\": [{\"radius\": 50, \"thickness\": 5, \"ior\": 1.5, \"semi_aperture\": 10, \"thicknes\": 3}," BACK "," STOP "]}", "thicknes"},
         BadLens{"empty surface list", "{\"surfaces\": []}", "empty"},
         BadLens{"surfaces not a list", "{\"surfaces\": 3}", "surfaces"},
         BadLens{"missing surfaces", "{\"name\": \"x\"}", "surfaces"},
-        BadLens{"index below 1", "{\"surfaces\": [" SURF(50, 5, 0.5, 10) "," STOP "," SURF(-50, 40, 1.0, 10) "]}", "ior must be at least 1"},
-        BadLens{"glass after the last surface", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," STOP "," SURF(-50, 40, 1.5, 10) "]}", "last medium"}),
+        BadLens{"index below 1", "{\"surfaces\": [" SURF(50, 5, 0.5, 10) "," BACK "," STOP "]}", "ior must be at least 1"},
+        BadLens{"glass after the last surface", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," BACK "," STOP "," SURF(-50, 40, 1.5, 10) "]}", "last medium"}),
     [](const ::testing::TestParamInfo<BadLens>& info) {
       std::string n = info.param.what;
       for (char& c : n)
         if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
       return n;
     });
+
+TEST(Lens, TheBaseOfTheBadFilesIsAValidLens) {
+  // Each bad file above breaks this one lens in one place.
+  const Lens lens = parseLensJson("{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," BACK "," STOP "]}", "good.json");
+  EXPECT_EQ(lens.stopIndex(), 2);
+}
 
 TEST(Lens, PbrtDatImportMatchesTheJsonTranscription) {
   const Lens json = loadLens(lensPath("pbrt_dgauss_50mm.json"));
