@@ -14,6 +14,7 @@
 
 #include "acquisition/dng_writer.h"
 #include "acquisition/simulated_camera.h"
+#include "acquisition/stepper_motion.h"
 #include "common/atomic_file.h"
 #include "common/config.h"
 #include "common/log.h"
@@ -77,6 +78,18 @@ CapturePlan CapturePlan::FromRig(const Rig& rig) {
   p.max_retries = rig.capture.max_retries;
   p.retry_delay_s = rig.capture.retry_delay_s;
   return p;
+}
+
+void checkPlanForRig(const Rig& rig, const CapturePlan& plan) {
+  std::string error;
+  if (!plan.IsValid(&error)) throw InputError("capture plan: " + error);
+  if (rig.head_driver != HeadDriver::kGpioStepper && rig.head_driver != HeadDriver::kTic) return;
+  const StepperGeometry& g =
+      rig.head_driver == HeadDriver::kTic ? rig.tic.geometry : rig.gpio.geometry;
+  for (double a : plan.anglesDeg()) {
+    checkSoftLimits(g, a, rig.file.string());
+    microstepsForAngle(g, a, rig.file.string());
+  }
 }
 
 MergeOptions mergeOptionsForRig(const Rig& rig, double iso) {
@@ -409,13 +422,7 @@ CaptureSummary Session::run() {
   std::string error;
   if (!plan_.IsValid(&error)) throw InputError("capture plan: " + error);
   angles_ = plan_.anglesDeg();
-  for (double a : angles_)
-    if (rig_.head_driver == HeadDriver::kGpioStepper || rig_.head_driver == HeadDriver::kTic) {
-      const auto& g = rig_.head_driver == HeadDriver::kTic ? rig_.tic.geometry : rig_.gpio.geometry;
-      if (a < g.min_deg || a > g.max_deg)
-        throw InputError(rig_.file.string(), "head.soft_limits_deg: the plan's angle " +
-                                                 std::to_string(a) + "° lies outside the soft limits");
-    }
+  checkPlanForRig(rig_, plan_);
   merge_ = mergeOptionsForRig(rig_, plan_.iso);
   sim_camera_ = dynamic_cast<SimulatedCamera*>(dev_.camera.get());
   if (sim_camera_) {

@@ -115,6 +115,10 @@ struct CaptureSummary {
 CaptureSummary runCapture(const Rig& rig, RigDevices& devices, const CapturePlan& plan,
                           const std::filesystem::path& out, const CaptureOptions& options = {});
 
+// Checks a plan against the rig before any device is opened: InputError naming the rig file when
+// an angle lies outside the head's soft limits or is not a whole number of microsteps.
+void checkPlanForRig(const Rig& rig, const CapturePlan& plan);
+
 // The merge options a rig implies at `iso` (gain, read noise, output scale).
 MergeOptions mergeOptionsForRig(const Rig& rig, double iso);
 

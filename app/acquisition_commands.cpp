@@ -211,6 +211,7 @@ void registerCapture(CLI::App& app) {
     plan.keep_raw = o->keep_raw;
     std::string error;
     if (!plan.IsValid(&error)) throw InputError("capture: " + error);
+    checkPlanForRig(rig, plan);  // before touching any device
     RigDevices devices = openRig(rig);
     CaptureOptions options;
     options.resume = o->resume;

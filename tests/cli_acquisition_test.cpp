@@ -103,6 +103,11 @@ TEST(CliRig, BadRigFilesExitTwoWithOneLine) {
     auto c = runFlarekit({"capture", "--rig", (dir / file).string(), "--out", (dir / "o").string()});
     EXPECT_EQ(c.exit_code, 2) << c.err;
   }
+  // A plan the head cannot step exactly is refused before any device is opened.
+  auto off_grid = runFlarekit({"capture", "--rig", (kSource / "rigs/pi-stepper-eos.toml").string(),
+                               "--out", (dir / "o").string(), "--step", "0.2"});
+  EXPECT_EQ(off_grid.exit_code, 2) << off_grid.err;
+  EXPECT_NE(off_grid.err.find("not a whole number of microsteps"), std::string::npos) << off_grid.err;
   auto missing = runFlarekit({"rig-check", "no-such-rig"});
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_EQ(lineCount(missing.err), 1) << missing.err;
