@@ -8,8 +8,11 @@
 #include "app/commands.h"
 #include "common/error.h"
 #include "common/log.h"
+#include "fit/evaluation.h"
 #include "fit/fit_capture.h"
 #include "fit/frames.h"
+#include "fit/optimizer_bench.h"
+#include "fit/report.h"
 
 namespace flarekit::app {
 namespace {
@@ -100,15 +103,90 @@ void registerFit(CLI::App& app) {
     fit::FrameStack stack = loadStack(o->stack);
     fit::FitResult result = fit::fitCapture(stack, options);
     result.model.save(o->out);
+    if (!o->report.empty()) fit::writeFitReport(o->report, result, stack);
     logInfo(result.summary.BriefReport());
     logInfo("Model written to " + o->out);
+  });
+}
+
+void registerFitEval(CLI::App& app) {
+  struct Options {
+    std::string model;
+    StackArgs stack;
+    std::string frames = "all";
+    bool json = false;
+    int threads = 2;
+  };
+  auto o = std::make_shared<Options>();
+  auto* cmd = app.add_subcommand(
+      "fit-eval", "Compare a fitted model with a capture and, where truth/ exists, with the ground "
+                  "truth: PSNR, centroid errors, detection recall and precision");
+  cmd->add_option("MODEL", o->model, "Model file (model.json)")->required();
+  cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder, or EXR files / folders")->required();
+  cmd->add_option("--frames", o->frames, "all (default) or odd (the frames --holdout odd left out)");
+  cmd->add_flag("--json", o->json, "Print one JSON object");
+  cmd->add_option("--threads", o->threads, "Threads (default 2)");
+  addStackOptions(cmd, o->stack);
+  cmd->callback([o] {
+    if (o->frames != "all" && o->frames != "odd")
+      throw InputError("--frames: expected all or odd, got \"" + o->frames + "\"");
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::max(1, o->threads));
+    const model::FlareModel m = model::FlareModel::load(o->model);
+    fit::FrameStack stack = loadStack(o->stack);
+    if (m.capture.image_size != stack.size)
+      throw InputError(o->model, "model is for " + std::to_string(m.capture.image_size.width) + "x" +
+                                     std::to_string(m.capture.image_size.height) + " frames, the capture's are " +
+                                     std::to_string(stack.size.width) + "x" + std::to_string(stack.size.height));
+    if (m.channels != stack.channels)
+      throw InputError(o->model, "model has " + std::to_string(m.channels) + " channel(s), the capture " +
+                                     std::to_string(stack.channels));
+    fit::EvaluationOptions options;
+    options.odd_frames_only = o->frames == "odd";
+    const fit::Evaluation ev = fit::evaluateModel(m, stack, options);
+    if (o->json)
+      std::cout << ev.toJson().dump(2) << "\n";
+    else
+      std::cout << ev.BriefReport() << "\n";
+  });
+}
+
+void registerBenchFit(CLI::App& app) {
+  struct Options {
+    StackArgs stack;
+    bool json = false;
+    int frames = 3, seeds = 1, gd_iterations = 200, threads = 2;
+  };
+  auto o = std::make_shared<Options>();
+  auto* cmd = benchCommand(app).add_subcommand(
+      "fit", "Ceres (Levenberg–Marquardt) against the paper's gradient descent on the same frames "
+             "from the same starts: time and cost evaluations to reach the GD's final cost");
+  cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder, or EXR files / folders")->required();
+  cmd->add_flag("--json", o->json, "Print one JSON object (always JSON; accepted for symmetry)");
+  cmd->add_option("--frames", o->frames, "Frames sampled evenly (default 3)");
+  cmd->add_option("--seeds", o->seeds, "Starts per frame: the brightest detections (default 1)");
+  cmd->add_option("--gd-iterations", o->gd_iterations, "Gradient-descent iterations per start (default 200)");
+  cmd->add_option("--threads", o->threads, "Threads (default 2)");
+  addStackOptions(cmd, o->stack);
+  cmd->callback([o] {
+    fit::OptimizerBenchOptions options;
+    options.frames = o->frames;
+    options.seeds_per_frame = o->seeds;
+    options.gd_iterations = o->gd_iterations;
+    options.fit.threads = o->threads;
+    std::string error;
+    if (!options.IsValid(&error)) throw InputError(error);
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, o->threads);
+    fit::FrameStack stack = loadStack(o->stack);
+    std::cout << fit::benchOptimizers(stack, options).dump(2) << "\n";
   });
 }
 
 }  // namespace
 
 void registerFitCommands(CLI::App& app) {
+  registerBenchFit(app);
   registerFit(app);
+  registerFitEval(app);
 }
 
 }  // namespace flarekit::app

@@ -186,25 +186,10 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
   data_valid_ = frame.valid(region_);
   edge_valid_ = frame.edge_valid(region_);
 
-  // The region scale s: the 99th percentile of the target over valid pixels (see cost.h).
-  std::vector<float> values;
-  values.reserve(region_.area());
-  for (int y = 0; y < region_.height; ++y) {
-    const float* p = target_.ptr<float>(y);
-    const uchar* v = data_valid_.ptr<uchar>(y);
-    for (int x = 0; x < region_.width; ++x) {
-      if (!v[x]) continue;
-      float s = 0;
-      for (int c = 0; c < channels_; ++c) s = std::max(s, p[x * channels_ + c]);
-      values.push_back(s);
-    }
-  }
+  // The region scale s: the brightest seed's peak (see cost.h), at least 3 noise σ.
   double scale = 0;
-  if (!values.empty()) {
-    const size_t k = static_cast<size_t>(0.99 * (values.size() - 1));
-    std::nth_element(values.begin(), values.begin() + k, values.end());
-    scale = values[k];
-  }
+  for (const auto& g : seeds)
+    for (int c = 0; c < channels_; ++c) scale = std::max({scale, g.border[c], g.inside[c]});
   scale_ = std::max({scale, 3 * frame.noise_sigma, 1e-12});
 
   const int stride = levelFor(region_.area(), options.max_pixels);

@@ -13,10 +13,12 @@
 // about as much as values whatever the σ.
 //
 // Normalisation (ours, the paper fits 8-bit-like images): HDR frames span orders of magnitude, so
-// every residual is divided by the region scale s: the 99th percentile of X over the valid pixels
-// of the region around the ghosts being fitted (never below 3 noise σ). A ghost at 1e-4 of the
-// light's brightness then weighs as much in its own fit as a bright one in its own, convergence
-// tolerances mean the same for both, and the robust loss ρ has one scale for all.
+// every residual is divided by the region scale s: the peak max(Ib, Ii) of the brightest ghost of
+// the group at its seed (never below 3 noise σ). A ghost at 1e-4 of the light's brightness then
+// weighs as much in its own fit as a bright one in its own, convergence tolerances mean the same
+// for both, and the robust loss ρ has one scale for all: residuals well above the ghost's own
+// brightness (the light's starburst, a brighter neighbour crossing the region) are outliers. (A
+// percentile of the frame over the region would be ruled by exactly those.)
 //
 // ρ is Cauchy's loss ρ(u) = b·ln(1 + u/b), b = loss_scale², applied per pixel
 // (shared/FITTING_NOTES.md: per-pixel blocks with Cauchy 0.2 cut the bias from an unmodelled
@@ -58,7 +60,7 @@ struct CostOptions {
   double edge_sigma2_px = 1.0;   // σ2: Gaussian after the Laplacian, pixels (> 0)
   double region_margin_px = 6;   // the fitted region reaches this far beyond the ghosts (≥ 0)
   double loss_scale = 0.2;       // Cauchy loss scale in normalised units; 0 = plain least squares
-  int max_pixels = 30000;        // larger regions are sampled on a stride (≥ 1000)
+  int max_pixels = 12000;        // larger regions are fitted on a coarser level (≥ 1000)
 
   bool IsValid(std::string* error) const;
 };

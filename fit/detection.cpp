@@ -122,6 +122,7 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
         continue;
       Detection d;
       d.blob = box;
+      d.mask = blob.clone();
       d.level_sigma = level;
       double peak = 0;
       cv::minMaxLoc(smooth(box), nullptr, &peak, nullptr, nullptr, blob);

@@ -55,6 +55,7 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
 struct Detection {
   model::GhostParameters seed;
   cv::Rect blob;            // the blob's box
+  cv::Mat mask;             // CV_8U over `blob`: the blob's pixels
   double peak = 0;          // its highest smoothed residual
   double level_sigma = 0;   // the level it was found at
 };

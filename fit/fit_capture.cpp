@@ -14,6 +14,7 @@
 #include "common/image.h"
 #include "common/log.h"
 #include "common/progress.h"
+#include "fit/evaluation.h"
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {
@@ -492,10 +493,42 @@ class CaptureFitter {
       stats.evaluations += r.evaluations;
       stats.iterations += r.iterations;
       const GhostParameters& g = r.ghosts[0];
-      const bool explains = r.final_cost <= (1 - options_.tracking.min_cost_reduction) * cost_without;
+      // Does the ghost explain its blob? The median absolute residual over the blob's pixels
+      // before and after (the region's cost, or a mean, would be ruled by the light's starburst
+      // and neighbours that cross the blob).
+      double before = 0, after = 0;
+      {
+        std::vector<double> b, a;
+        model::ViewTransform view;
+        view.scale = 1.0 / kd;
+        std::vector<GhostParameters> fitted = {g};
+        cv::Mat rendered = luminance(model::renderGhosts(fitted, c.blob, stack_.channels, {}, view));
+        for (int y = 0; y < c.blob.height; ++y)
+          for (int x = 0; x < c.blob.width; ++x) {
+            if (!c.mask.at<uchar>(y, x)) continue;
+            const double v = residual.at<float>(c.blob.y + y, c.blob.x + x);
+            b.push_back(std::abs(v));
+            a.push_back(std::abs(v - rendered.at<float>(y, x)));
+          }
+        before = medianOf(b);
+        after = medianOf(a);
+      }
+      const bool explains = after <= (1 - options_.tracking.min_cost_reduction) * before;
       bool dup_after = false;
       for (const auto& o : ghosts)
         if (sameGhost(g, o)) dup_after = true;
+      if (logLevel() >= LogLevel::kDebug) {
+        std::ostringstream m;
+        m << "fit: candidate at θ = " << frame(pos).angle_deg << "° level " << c.level_sigma
+          << "σ blob " << blob << ": seed (" << seed.center_x << ", " << seed.center_y << ") L "
+          << seed.left << " R " << seed.right << " h " << seed.height << " Ib " << seed.border[0]
+          << " → (" << g.center_x << ", " << g.center_y << ") L " << g.left << " R " << g.right
+          << " h " << g.height << " Ib " << g.border[0] << " Ii " << g.inside[0] << "; cost "
+          << cost_without << " → " << r.final_cost << ", blob residual " << before << " → " << after
+          << (explains ? "" : " (does not explain)")
+          << (dup_after ? " (duplicate)" : "") << " " << endReason(g, noise_sigma);
+        logDebug(m.str());
+      }
       if (!explains || dup_after || !endReason(g, noise_sigma).empty()) {
         ++rejected_;
         continue;
@@ -611,6 +644,28 @@ class CaptureFitter {
 };
 
 }  // namespace
+
+std::vector<GhostParameters> detectSeeds(const Frame& frame, int channels, const FitOptions& options) {
+  EdgeFilter edge(options.cost);
+  FramePyramid pyramid(frame.image, frame.valid, edge);
+  const int kd = std::max(1, static_cast<int>(std::floor(std::sqrt(frame.image.size().area() / 160000.0))));
+  const FrameData& level = pyramid.level(kd);
+  const cv::Mat lum = luminance(level.image);
+  const LightImage light = findLight(lum, level.valid, level.noise_sigma, options.detection);
+  std::vector<GhostParameters> seeds;
+  for (const auto& c : detectGhosts(lum, level.valid, level.noise_sigma, light, options.detection)) {
+    GhostParameters g = c.seed;
+    for (double* v : {&g.center_x, &g.center_y, &g.left, &g.right, &g.height, &g.inside_falloff, &g.outside_falloff})
+      *v *= kd;
+    g.channels = channels;
+    for (int k = 1; k < channels; ++k) {
+      g.border[k] = g.border[0];
+      g.inside[k] = g.inside[0];
+    }
+    seeds.push_back(g);
+  }
+  return seeds;
+}
 
 FitResult fitCapture(const FrameStack& stack, const FitOptions& options) {
   std::string error;

@@ -42,8 +42,9 @@ struct TrackingOptions {
   double min_peak_sigma = 4;
   // A ghost ends when less than this fraction of its box lies in the image (0–1).
   double min_visible_fraction = 0.05;
-  // A new ghost is kept when its fit lowers its region's cost by at least this fraction (0–1).
-  double min_cost_reduction = 0.2;
+  // A new ghost is kept when its fit removes at least this fraction of the residual energy over
+  // the blob it was found in (0–1).
+  double min_cost_reduction = 0.5;
   // A ghost's fit counts as "not described by the model" (a caustic, fold or other shape the
   // model cannot draw) when the residual's RMS over its region exceeds this fraction of its peak.
   double unexplained_fraction = 0.25;
@@ -141,6 +142,12 @@ model::Polynomial fitPolynomial(const std::vector<double>& angles_deg,
 // polynomial would leave the parameter's bounds inside the range.
 model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   const model::CaptureInfo& info, int channels, int degree);
+
+// The seeds detection finds in one frame with nothing modelled yet (brightest first), in the
+// stack's channel count: what the fitter starts new ghosts from (and what `bench fit` starts both
+// optimizers from).
+std::vector<model::GhostParameters> detectSeeds(const Frame& frame, int channels,
+                                                const FitOptions& options);
 
 // Seeds every parameter of a ghost at `angle_deg` from a track's last fits (polynomial
 // extrapolation over at most `frames` of them, degree ≤ `degree`).

@@ -36,9 +36,9 @@ Optimizer parseOptimizer(const std::string& name);
 struct SolverOptions {
   Optimizer optimizer = Optimizer::kCeres;
   // Ceres: maximum Levenberg–Marquardt iterations per group and frame (≥ 1).
-  int max_iterations = 25;
+  int max_iterations = 15;
   // Ceres: stop when the relative cost change of a step is below this (> 0).
-  double function_tolerance = 1e-6;
+  double function_tolerance = 1e-5;
   // Ceres: stop when the relative parameter change of a step is below this (> 0).
   double parameter_tolerance = 1e-7;
   // Ceres: threads evaluating residual blocks (≥ 1).

@@ -1,0 +1,260 @@
+#include "fit/evaluation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common/exr.h"
+#include "common/image.h"
+#include "common/progress.h"
+#include "fit/cost.h"
+
+namespace flarekit::fit {
+
+namespace {
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+struct Blob {
+  int id = 0;
+  cv::Point2d centroid;
+  double peak = 0;
+  double radius = 0;
+  bool present = false;
+};
+
+// Intensity-weighted centroid, peak and equivalent radius (area above 10 % of the peak) of a
+// luminance image placed at `offset` in the frame.
+Blob describe(const cv::Mat& lum, cv::Point offset) {
+  Blob b;
+  double sum = 0, sx = 0, sy = 0, peak = 0;
+  for (int y = 0; y < lum.rows; ++y) {
+    const float* p = lum.ptr<float>(y);
+    for (int x = 0; x < lum.cols; ++x) {
+      const double v = std::max(0.0f, p[x]);
+      sum += v;
+      sx += v * (x + 0.5);
+      sy += v * (y + 0.5);
+      peak = std::max(peak, v);
+    }
+  }
+  if (sum <= 0) return b;
+  b.present = true;
+  b.peak = peak;
+  b.centroid = {offset.x + sx / sum, offset.y + sy / sum};
+  const int area = cv::countNonZero(lum > 0.1 * peak);
+  b.radius = std::sqrt(area / M_PI);
+  return b;
+}
+
+double psnr(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask, double peak) {
+  if (cv::countNonZero(mask) == 0 || !(peak > 0)) return kNaN;
+  cv::Mat d;
+  cv::subtract(a, b, d, cv::noArray(), CV_64F);
+  cv::multiply(d, d, d);
+  const double mse = cv::mean(d, mask)[0];
+  if (mse <= 0) return 200;
+  return 10 * std::log10(peak * peak / mse);
+}
+
+}  // namespace
+
+bool EvaluationOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (!(visible_factor > 0)) return fail("visible_factor must be > 0");
+  if (!(match_fraction > 0)) return fail("match_fraction must be > 0");
+  if (!(min_match_px > 0)) return fail("min_match_px must be > 0");
+  return true;
+}
+
+double medianOf(std::vector<double> v) {
+  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }), v.end());
+  if (v.empty()) return kNaN;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
+                         const EvaluationOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument("EvaluationOptions: " + error);
+  Evaluation ev;
+  ev.has_truth = stack.has_truth;
+  const cv::Rect image(0, 0, stack.size.width, stack.size.height);
+  std::vector<double> psnrs, capture_psnrs, errors;
+  Progress progress("fit-eval", static_cast<long long>(stack.frames.size()));
+  for (size_t i = 0; i < stack.frames.size(); ++i) {
+    progress.advance();
+    if (options.odd_frames_only && i % 2 == 0) continue;
+    const Frame& f = stack.frames[i];
+    FrameEvaluation fe;
+    fe.angle_deg = f.angle_deg;
+    const cv::Mat flare_model = m.render(f.angle_deg, 0, stack.size);
+    const cv::Mat model_lum = luminance(flare_model);
+    const cv::Mat frame_lum = luminance(f.image);
+    cv::Mat truth_flare;
+    std::vector<GhostTruth> truth;
+    if (stack.has_truth) {
+      cv::Mat radiance = readExrLayer(f.truth_file, "");
+      cv::patchNaNs(radiance, 0);
+      cv::Mat d;
+      cv::subtract(luminance(f.image), luminance(radiance), d, cv::noArray(), CV_64F);
+      cv::multiply(d, d, d);
+      fe.noise_sigma = std::sqrt(cv::mean(d, f.valid)[0]);
+      truth = readGhostTruth(f.ghosts_file);
+      truth_flare = cv::Mat::zeros(stack.size, CV_32F);
+      for (const auto& g : truth) truth_flare += luminance(g.image);
+    } else {
+      fe.noise_sigma = estimateNoiseSigma(f.image, f.valid);
+    }
+    // PSNR against the frame over the model's footprint.
+    {
+      cv::Mat mask = (model_lum > fe.noise_sigma) & (f.valid > 0);
+      double peak = 0;
+      cv::minMaxLoc(frame_lum, nullptr, &peak, nullptr, nullptr, mask);
+      fe.capture_psnr_db = psnr(model_lum, frame_lum, mask, peak);
+      capture_psnrs.push_back(fe.capture_psnr_db);
+    }
+    // Model ghosts, one by one.
+    std::vector<Blob> model_blobs;
+    model::RenderOptions render;
+    for (const auto& g : m.ghostsAt(f.angle_deg)) {
+      const cv::Rect box = model::ghostPixelBounds(g.parameters) & image;
+      Blob b;
+      b.id = g.id;
+      if (!box.empty()) {
+        std::vector<model::GhostParameters> one = {g.parameters};
+        b = describe(luminance(model::renderGhosts(one, box, m.channels, render)), box.tl());
+        b.id = g.id;
+      }
+      if (b.present) model_blobs.push_back(b);
+    }
+    fe.model_ghosts = static_cast<int>(model_blobs.size());
+    if (stack.has_truth) {
+      cv::Mat region = (truth_flare > fe.noise_sigma) & (f.valid > 0);
+      double peak = 0;
+      cv::minMaxLoc(truth_flare, nullptr, &peak, nullptr, nullptr, region);
+      fe.psnr_db = psnr(model_lum, truth_flare, region, peak);
+      psnrs.push_back(fe.psnr_db);
+      std::vector<Blob> true_blobs;
+      for (const auto& g : truth) {
+        Blob b = describe(luminance(g.image), {0, 0});
+        b.id = g.id;
+        if (b.present) true_blobs.push_back(b);
+      }
+      // Greedy matching by distance within each true ghost's gate.
+      struct Pair {
+        double d;
+        int t, mdl;
+      };
+      std::vector<Pair> pairs;
+      for (size_t t = 0; t < true_blobs.size(); ++t)
+        for (size_t k = 0; k < model_blobs.size(); ++k) {
+          const double d = cv::norm(true_blobs[t].centroid - model_blobs[k].centroid);
+          const double gate = std::max(options.min_match_px, options.match_fraction * true_blobs[t].radius);
+          if (d <= gate) pairs.push_back({d, static_cast<int>(t), static_cast<int>(k)});
+        }
+      std::sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return a.d < b.d; });
+      // Visible true ghosts take their matches first, so a faint true ghost beside a visible one
+      // does not steal its model ghost.
+      std::stable_sort(pairs.begin(), pairs.end(), [&](const Pair& a, const Pair& b) {
+        const bool va = true_blobs[a.t].peak > options.visible_factor * fe.noise_sigma;
+        const bool vb = true_blobs[b.t].peak > options.visible_factor * fe.noise_sigma;
+        return va > vb;
+      });
+      std::vector<int> true_match(true_blobs.size(), -1), model_match(model_blobs.size(), -1);
+      for (const auto& p : pairs) {
+        if (true_match[p.t] >= 0 || model_match[p.mdl] >= 0) continue;
+        true_match[p.t] = p.mdl;
+        model_match[p.mdl] = p.t;
+      }
+      for (size_t t = 0; t < true_blobs.size(); ++t) {
+        if (!(true_blobs[t].peak > options.visible_factor * fe.noise_sigma)) continue;
+        ++fe.true_ghosts_visible;
+        if (true_match[t] >= 0) {
+          ++fe.true_ghosts_found;
+          const double e = cv::norm(true_blobs[t].centroid - model_blobs[true_match[t]].centroid);
+          fe.centroid_errors_px.push_back(e);
+          errors.push_back(e);
+        } else {
+          fe.missed_true_ids.push_back(true_blobs[t].id);
+        }
+      }
+      for (size_t k = 0; k < model_blobs.size(); ++k) {
+        if (model_match[k] >= 0) ++fe.model_ghosts_matched;
+        else fe.unmatched_model_ids.push_back(model_blobs[k].id);
+      }
+    } else {
+      fe.psnr_db = kNaN;
+    }
+    ev.true_ghosts_visible += fe.true_ghosts_visible;
+    ev.true_ghosts_found += fe.true_ghosts_found;
+    ev.model_ghosts += fe.model_ghosts;
+    ev.model_ghosts_matched += fe.model_ghosts_matched;
+    ev.frames.push_back(std::move(fe));
+  }
+  progress.finish();
+  ev.median_psnr_db = medianOf(psnrs);
+  ev.median_capture_psnr_db = medianOf(capture_psnrs);
+  ev.median_centroid_error_px = medianOf(errors);
+  ev.recall = ev.true_ghosts_visible ? double(ev.true_ghosts_found) / ev.true_ghosts_visible : kNaN;
+  ev.precision = ev.model_ghosts ? double(ev.model_ghosts_matched) / ev.model_ghosts : kNaN;
+  return ev;
+}
+
+namespace {
+nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+}  // namespace
+
+nlohmann::json Evaluation::toJson() const {
+  nlohmann::json j;
+  j["has_truth"] = has_truth;
+  j["frames_evaluated"] = frames.size();
+  j["median_psnr_db"] = number(median_psnr_db);
+  j["median_capture_psnr_db"] = number(median_capture_psnr_db);
+  j["median_centroid_error_px"] = number(median_centroid_error_px);
+  j["recall"] = number(recall);
+  j["precision"] = number(precision);
+  j["true_ghosts_visible"] = true_ghosts_visible;
+  j["true_ghosts_found"] = true_ghosts_found;
+  j["model_ghosts"] = model_ghosts;
+  j["model_ghosts_matched"] = model_ghosts_matched;
+  nlohmann::json fs = nlohmann::json::array();
+  for (const auto& f : frames) {
+    fs.push_back({{"angle_deg", f.angle_deg},
+                  {"noise_sigma", f.noise_sigma},
+                  {"psnr_db", number(f.psnr_db)},
+                  {"capture_psnr_db", number(f.capture_psnr_db)},
+                  {"true_ghosts_visible", f.true_ghosts_visible},
+                  {"true_ghosts_found", f.true_ghosts_found},
+                  {"model_ghosts", f.model_ghosts},
+                  {"model_ghosts_matched", f.model_ghosts_matched},
+                  {"median_centroid_error_px", number(medianOf(f.centroid_errors_px))},
+                  {"missed_true_ids", f.missed_true_ids},
+                  {"unmatched_model_ids", f.unmatched_model_ids}});
+  }
+  j["frames"] = fs;
+  return j;
+}
+
+std::string Evaluation::BriefReport() const {
+  std::ostringstream s;
+  s.precision(3);
+  s << frames.size() << " frame(s): ";
+  if (has_truth)
+    s << "median PSNR vs noise-free flare " << median_psnr_db << " dB, median centroid error "
+      << median_centroid_error_px << " px, recall " << 100 * recall << " % (" << true_ghosts_found
+      << "/" << true_ghosts_visible << "), precision " << 100 * precision << " % ("
+      << model_ghosts_matched << "/" << model_ghosts << "); ";
+  s << "median PSNR vs capture " << median_capture_psnr_db << " dB.";
+  return s.str();
+}
+
+}  // namespace flarekit::fit

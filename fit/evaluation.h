@@ -1,0 +1,72 @@
+#pragma once
+// Measuring a fitted flare model against a capture and, for simulated captures, against the
+// ground truth under truth/ (issue 6, `flarekit fit-eval`):
+//
+//  - PSNR of the model against the noise-free flare (the sum of the per-ghost truth layers) over
+//    the flare region: the pixels where that flare exceeds the frame's noise σ and the frame is
+//    not saturated. Peak = the flare's maximum over the region: PSNR = 10 log10(peak² / MSE).
+//  - Ghost centroids (intensity-weighted, over the image) of every model ghost and every true
+//    ghost; a true ghost is visible when its peak exceeds visible_factor × the noise floor (the
+//    issue's rule: 10×). Model and true ghosts are matched greedily by centroid distance within a
+//    gate of max(min_match_px, match_fraction × the true ghost's radius).
+//  - Recall: matched visible true ghosts / visible true ghosts. Precision: model ghosts matched to
+//    any true ghost / model ghosts present. Centroid errors over matched visible pairs.
+//  - Without truth: PSNR of the model against the frame over the pixels where the model exceeds
+//    the noise σ.
+// The noise floor σ is the RMS of frame − truth over valid pixels (truth known), else the robust
+// estimate of fit/cost.h.
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "fit/frames.h"
+#include "model/flare_model.h"
+
+namespace flarekit::fit {
+
+struct EvaluationOptions {
+  bool odd_frames_only = false;   // evaluate frames 1, 3, 5, … (the ones --holdout odd left out)
+  double visible_factor = 10;     // a true ghost counts when its peak > this × noise σ (> 0)
+  double match_fraction = 0.25;   // gate as a fraction of the true ghost's radius (> 0)
+  double min_match_px = 3;        // smallest gate, pixels (> 0)
+
+  bool IsValid(std::string* error) const;
+};
+
+struct FrameEvaluation {
+  double angle_deg = 0;
+  double noise_sigma = 0;
+  double psnr_db = 0;              // vs truth (NaN without truth)
+  double capture_psnr_db = 0;      // vs the frame (NaN when the model is empty here)
+  int true_ghosts_visible = 0;
+  int true_ghosts_found = 0;       // visible and matched
+  int model_ghosts = 0;            // model ghosts with any pixel in the image
+  int model_ghosts_matched = 0;    // matched to some true ghost
+  std::vector<double> centroid_errors_px;  // per matched visible pair
+  std::vector<int> missed_true_ids;        // visible true ghosts without a match
+  std::vector<int> unmatched_model_ids;    // model ghosts without a true ghost
+};
+
+struct Evaluation {
+  bool has_truth = false;
+  std::vector<FrameEvaluation> frames;
+  double median_psnr_db = 0;
+  double median_capture_psnr_db = 0;
+  double median_centroid_error_px = 0;
+  double recall = 0, precision = 0;
+  int true_ghosts_visible = 0, true_ghosts_found = 0, model_ghosts = 0, model_ghosts_matched = 0;
+
+  nlohmann::json toJson() const;
+  std::string BriefReport() const;
+};
+
+Evaluation evaluateModel(const model::FlareModel& model, const FrameStack& stack,
+                         const EvaluationOptions& options = {});
+
+// Median of the finite values (NaN when none).
+double medianOf(std::vector<double> values);
+
+}  // namespace flarekit::fit

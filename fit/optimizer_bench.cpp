@@ -1,0 +1,108 @@
+#include "fit/optimizer_bench.h"
+
+#include <cmath>
+
+#include "common/error.h"
+#include "common/progress.h"
+#include "fit/evaluation.h"
+
+namespace flarekit::fit {
+
+bool OptimizerBenchOptions::IsValid(std::string* error) const {
+  if (frames < 1 || seeds_per_frame < 1 || gd_iterations < 1) {
+    if (error) *error = "frames, seeds_per_frame and gd_iterations must be ≥ 1";
+    return false;
+  }
+  return fit.IsValid(error);
+}
+
+nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw InputError("bench fit: " + error);
+  EdgeFilter edge(options.fit.cost);
+  nlohmann::json cases = nlohmann::json::array();
+  std::vector<double> speedup_time, speedup_evals;
+  const int n = static_cast<int>(stack.frames.size());
+  Progress progress("bench fit", options.frames);
+  int reached = 0, total = 0;
+  for (int k = 0; k < options.frames; ++k) {
+    progress.advance();
+    // Sample inside the range (the ends are where ghosts are hardest to see).
+    const int index = std::min(n - 1, static_cast<int>((k + 0.5) * n / options.frames));
+    const Frame& frame = stack.frames[index];
+    auto seeds = detectSeeds(frame, stack.channels, options.fit);
+    if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
+    FramePyramid pyramid(frame.image, frame.valid, edge);
+    for (const auto& seed : seeds) {
+      std::vector<model::GhostParameters> one = {seed};
+      SolverOptions gd = options.fit.solver;
+      gd.optimizer = Optimizer::kWalchGd;
+      gd.gd_max_iterations = options.gd_iterations;
+      gd.gd_patience = options.gd_iterations;
+      gd.record_trace = true;
+      gd.threads = options.fit.threads;
+      GroupCost gd_cost(pyramid, edge, {}, one, options.fit.cost);
+      const GroupFitResult g = solveGroup(gd_cost, one, gd);
+      SolverOptions lm = options.fit.solver;
+      lm.optimizer = Optimizer::kCeres;
+      lm.record_trace = true;
+      lm.max_iterations = 100;
+      lm.function_tolerance = 1e-10;
+      lm.parameter_tolerance = 1e-10;
+      lm.threads = options.fit.threads;
+      GroupCost lm_cost(pyramid, edge, {}, one, options.fit.cost);
+      const GroupFitResult c = solveGroup(lm_cost, one, lm);
+      // GD's time and evaluations to its own final cost.
+      TracePoint gd_reach = g.trace.back();
+      for (const auto& t : g.trace)
+        if (t.cost <= g.final_cost) {
+          gd_reach = t;
+          break;
+        }
+      nlohmann::json entry = {{"angle_deg", frame.angle_deg},
+                              {"seed", model::toParameterVector(seed)},
+                              {"initial_cost", g.initial_cost},
+                              {"gd_final_cost", g.final_cost},
+                              {"gd_seconds", gd_reach.seconds},
+                              {"gd_evaluations", gd_reach.evaluations},
+                              {"gd_iterations", g.iterations},
+                              {"ceres_final_cost", c.final_cost},
+                              {"ceres_seconds_total", c.seconds},
+                              {"ceres_evaluations_total", c.evaluations},
+                              {"ceres_iterations", c.iterations}};
+      ++total;
+      bool ok = false;
+      for (const auto& t : c.trace)
+        if (t.cost <= g.final_cost) {
+          entry["ceres_seconds_to_gd_cost"] = t.seconds;
+          entry["ceres_evaluations_to_gd_cost"] = t.evaluations;
+          const double st = gd_reach.seconds / std::max(t.seconds, 1e-9);
+          const double se = double(gd_reach.evaluations) / std::max<long long>(t.evaluations, 1);
+          entry["speedup_time"] = st;
+          entry["speedup_evaluations"] = se;
+          speedup_time.push_back(st);
+          speedup_evals.push_back(se);
+          ok = true;
+          ++reached;
+          break;
+        }
+      entry["ceres_reached_gd_cost"] = ok;
+      cases.push_back(entry);
+    }
+  }
+  progress.finish();
+  nlohmann::json out;
+  out["benchmark"] = "fit";
+  out["capture"] = stack.source.string();
+  out["gd_iterations"] = options.gd_iterations;
+  out["cases"] = cases;
+  out["cases_total"] = total;
+  out["cases_ceres_reached_gd_cost"] = reached;
+  auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  out["median_speedup_time"] = num(medianOf(speedup_time));
+  out["median_speedup_evaluations"] = num(medianOf(speedup_evals));
+  out["threads"] = options.fit.threads;
+  return out;
+}
+
+}  // namespace flarekit::fit

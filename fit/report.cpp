@@ -1,0 +1,124 @@
+#include "fit/report.h"
+
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common/atomic_file.h"
+#include "common/config.h"
+#include "common/image.h"
+
+namespace flarekit::fit {
+namespace fs = std::filesystem;
+
+bool ReportOptions::IsValid(std::string* error) const {
+  if (contact_sheets < 0) {
+    if (error) *error = "contact_sheets must be ≥ 0";
+    return false;
+  }
+  return true;
+}
+
+namespace {
+
+// Log scale from lo to hi (decades) onto 0..255.
+cv::Mat logView(const cv::Mat& lum, double lo, double hi) {
+  cv::Mat l;
+  cv::max(lum, lo, l);
+  cv::log(l, l);
+  l = (l - std::log(lo)) * (255.0 / (std::log(hi) - std::log(lo)));
+  cv::Mat u;
+  l.convertTo(u, CV_8U);
+  cv::Mat bgr;
+  cv::cvtColor(u, bgr, cv::COLOR_GRAY2BGR);
+  return bgr;
+}
+
+}  // namespace
+
+cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& model_image, double noise_sigma) {
+  const cv::Mat c = luminance(capture), m = luminance(model_image);
+  cv::Mat r = cv::abs(c - m);
+  double peak = 0;
+  cv::minMaxLoc(m, nullptr, &peak);
+  double cpeak = 0;
+  cv::minMaxLoc(c, nullptr, &cpeak);
+  // From a fraction of the noise floor to the brightest ghost (the light itself clips).
+  const double lo = std::max(0.3 * noise_sigma, 1e-12);
+  const double hi = std::max({peak * 2, lo * 100});
+  cv::Mat sheet;
+  cv::hconcat(std::vector<cv::Mat>{logView(c, lo, hi), logView(m, lo, hi), logView(r, lo, hi)}, sheet);
+  const int w = capture.cols;
+  for (int k = 1; k < 3; ++k) cv::line(sheet, {k * w, 0}, {k * w, sheet.rows - 1}, cv::Scalar(0, 0, 255));
+  const char* labels[] = {"capture", "model", "|residual|"};
+  for (int k = 0; k < 3; ++k)
+    cv::putText(sheet, labels[k], {k * w + 6, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 255, 255), 1);
+  return sheet;
+}
+
+void writeFitReport(const fs::path& dir, const FitResult& result, const FrameStack& stack,
+                    const ReportOptions& options) {
+  fs::create_directories(dir);
+  const auto names = model::parameterNames(stack.channels);
+  nlohmann::json summary;
+  const FitSummary& s = result.summary;
+  summary["brief"] = s.BriefReport();
+  summary["optimizer"] = s.optimizer;
+  summary["frames_total"] = s.frames_total;
+  summary["frames_fitted"] = s.frames_fitted;
+  summary["ghosts"] = s.ghosts;
+  summary["detections"] = s.detections;
+  summary["detections_rejected"] = s.detections_rejected;
+  summary["ghosts_dropped_short"] = s.ghosts_dropped_short;
+  summary["seconds_total"] = s.seconds_total;
+  summary["evaluations"] = s.evaluations;
+  summary["warnings"] = s.warnings;
+  nlohmann::json ghosts = nlohmann::json::array();
+  for (const auto& t : result.tracks) {
+    int flagged = 0;
+    for (bool b : t.unexplained) flagged += b;
+    ghosts.push_back({{"id", t.id},
+                      {"angle_min_deg", t.angles_deg.front()},
+                      {"angle_max_deg", t.angles_deg.back()},
+                      {"frames", t.angles_deg.size()},
+                      {"key_frame_angle_deg", result.frames.empty() ? 0.0 : t.angles_deg.front()},
+                      {"ends_low", t.end_low},
+                      {"ends_high", t.end_high},
+                      {"frames_not_described", flagged},
+                      {"fraction_not_described", double(flagged) / t.angles_deg.size()}});
+    std::ostringstream csv;
+    csv << std::setprecision(9) << "angle_deg";
+    for (const auto& n : names) csv << "," << n;
+    csv << ",residual_rms,peak,not_described\n";
+    for (size_t i = 0; i < t.angles_deg.size(); ++i) {
+      csv << t.angles_deg[i];
+      for (double v : model::toParameterVector(t.fits[i])) csv << "," << v;
+      csv << "," << t.residual_rms[i] << "," << t.peak[i] << "," << (t.unexplained[i] ? 1 : 0) << "\n";
+    }
+    writeTextFileAtomically(dir / ("ghost_" + std::to_string(t.id) + ".csv"), csv.str());
+  }
+  summary["ghost_tracks"] = ghosts;
+  writeJsonFile(dir / "summary.json", summary);
+
+  if (options.contact_sheets > 0 && !result.frames.empty()) {
+    const int n = static_cast<int>(result.frames.size());
+    const int count = std::min(options.contact_sheets, n);
+    for (int k = 0; k < count; ++k) {
+      const int i = count == 1 ? 0 : k * (n - 1) / (count - 1);
+      const FrameFit& ff = result.frames[i];
+      const Frame& f = stack.frames[ff.frame];
+      // Ghosts as the model file has them (polynomials), so the sheet shows what users get.
+      const cv::Mat model_image = result.model.render(f.angle_deg, 0, stack.size);
+      cv::Mat sheet = contactSheet(f.image, model_image, ff.noise_sigma);
+      std::ostringstream name;
+      name << "contact_" << std::fixed << std::setprecision(2) << f.angle_deg << ".png";
+      writeImage8(dir / name.str(), sheet);
+    }
+  }
+}
+
+}  // namespace flarekit::fit

@@ -1,0 +1,29 @@
+#pragma once
+// `flarekit fit --report DIR`: what a person checks after a fit.
+//   DIR/summary.json            the FitSummary, every ghost's range, key frame, end reasons, and
+//                               how often the model could not describe it (caustics, folds)
+//   DIR/ghost_<id>.csv          the ghost's track: angle, every parameter, residual RMS, peak,
+//                               unexplained flag, per fitted frame
+//   DIR/contact_<angle>.png     for sampled frames: capture | model | |residual|, on one shared
+//                               logarithmic scale (decades from the noise floor to the peak)
+// All files are written atomically.
+
+#include <filesystem>
+
+#include "fit/fit_capture.h"
+#include "fit/frames.h"
+
+namespace flarekit::fit {
+
+struct ReportOptions {
+  int contact_sheets = 8;  // frames sampled evenly over the range for contact sheets (≥ 0)
+  bool IsValid(std::string* error) const;
+};
+
+void writeFitReport(const std::filesystem::path& dir, const FitResult& result,
+                    const FrameStack& stack, const ReportOptions& options = {});
+
+// The contact-sheet image (8-bit BGR) of one frame: capture | model | |capture − model|.
+cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& model_image, double noise_sigma);
+
+}  // namespace flarekit::fit
