@@ -321,6 +321,11 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
           return (rays.x_mm[b] - rays.x_mm[a]) * (rays.y_mm[c] - rays.y_mm[a]) -
                  (rays.x_mm[c] - rays.x_mm[a]) * (rays.y_mm[b] - rays.y_mm[a]);
         };
+        // Only quads that show part of the ghost count: outside it rays may fold freely.
+        if (!valid(k00) && !valid(k10) && !valid(k01) && !valid(k11)) {
+          orientation[k00] = 2;
+          continue;
+        }
         const float s1 = cross(k00, k10, k11), s2 = cross(k00, k11, k01);
         orientation[k00] = (s1 > 0 && s2 > 0) ? 1 : (s1 < 0 && s2 < 0) ? -1 : 0;
       }
@@ -333,7 +338,7 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
       const int a = i + di[d], b = j + dj[d];
       if (a < 0 || b < 0 || a + 1 >= n || b + 1 >= n) continue;
       const int8_t q = orientation[static_cast<size_t>(b * n + a)];
-      if (q != 0 && q != o) return true;
+      if (q != 0 && q != 2 && q != o) return true;
     }
     return false;
   };
@@ -420,40 +425,47 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
           refs[offset[static_cast<size_t>(ty * ncx + tx)]++] = {static_cast<uint32_t>(b), static_cast<uint32_t>(i)};
     }
   });
-  // Level 2 and accumulation, one coarse tile per task: each fine tile keeps the triangles that
-  // overlap it and sums them in a tile-local planar buffer (in cache), written to the frame once.
+  // Level 2 and accumulation, one coarse tile per task: the coarse tile's triangles are dealt to
+  // the fine tiles their boxes overlap (one pass over the list, §4.3 Algorithm 2), then each fine
+  // tile sums its triangles in a tile-local planar buffer (in cache), written to the frame once.
   tbb::parallel_for(0, tiles, [&](int tile) {
     const int cx = tile % ncx, cy = tile / ncx;
     const size_t begin = start[static_cast<size_t>(tile)], end = start[static_cast<size_t>(tile) + 1];
     if (begin == end) return;
-    std::vector<const RasterTriangle*> fine;
+    const int tx0 = cx * C, ty0 = cy * C;
+    const int tw = std::min(W, tx0 + C) - tx0, th = std::min(H, ty0 + C) - ty0;
+    const int nfx = (tw + F - 1) / F, nfy = (th + F - 1) / F;
+    std::vector<std::vector<const RasterTriangle*>> fine(static_cast<size_t>(nfx) * static_cast<size_t>(nfy));
+    for (size_t k = begin; k < end; ++k) {
+      const RasterTriangle& t = batches[refs[k].batch][refs[k].index];
+      const int fx0 = (std::max(t.x0, tx0) - tx0) / F, fx1 = (std::min(t.x1, tx0 + tw - 1) - tx0) / F;
+      const int fy0 = (std::max(t.y0, ty0) - ty0) / F, fy1 = (std::min(t.y1, ty0 + th - 1) - ty0) / F;
+      for (int fy = fy0; fy <= fy1; ++fy)
+        for (int fx = fx0; fx <= fx1; ++fx) fine[static_cast<size_t>(fy * nfx + fx)].push_back(&t);
+    }
     const size_t area = static_cast<size_t>(F) * static_cast<size_t>(F);
     std::vector<float> r(area), g(area), b(area);
-    for (int fy = cy * C; fy < std::min(H, (cy + 1) * C); fy += F)
-      for (int fx = cx * C; fx < std::min(W, (cx + 1) * C); fx += F) {
+    for (int j = 0; j < nfy; ++j)
+      for (int i = 0; i < nfx; ++i) {
+        const auto& list = fine[static_cast<size_t>(j * nfx + i)];
+        if (list.empty()) continue;
+        const int fx = tx0 + i * F, fy = ty0 + j * F;
         const int fx1 = std::min(W, fx + F) - 1, fy1 = std::min(H, fy + F) - 1;
-        fine.clear();
-        for (size_t k = begin; k < end; ++k) {
-          const RasterTriangle& t = batches[refs[k].batch][refs[k].index];
-          if (t.x1 < fx || t.x0 > fx1 || t.y1 < fy || t.y0 > fy1) continue;
-          fine.push_back(&t);
-        }
-        if (fine.empty()) continue;
         std::fill(r.begin(), r.end(), 0.0f);
         std::fill(g.begin(), g.end(), 0.0f);
         std::fill(b.begin(), b.end(), 0.0f);
         const Planes p{r.data(), g.data(), b.data(), F, fx, fy};
-        for (const RasterTriangle* t : fine)
+        for (const RasterTriangle* t : list)
           rasterizeInto(*t, aperture, std::max(t->x0, fx), std::min(t->x1, fx1), std::max(t->y0, fy),
                         std::min(t->y1, fy1), p);
         for (int y = fy; y <= fy1; ++y) {
           auto* dst = image->ptr<cv::Vec3f>(y);
           const size_t o = static_cast<size_t>(y - fy) * static_cast<size_t>(F);
           for (int x = fx; x <= fx1; ++x) {
-            const size_t i = o + static_cast<size_t>(x - fx);
-            dst[x][0] += r[i];
-            dst[x][1] += g[i];
-            dst[x][2] += b[i];
+            const size_t q = o + static_cast<size_t>(x - fx);
+            dst[x][0] += r[q];
+            dst[x][1] += g[q];
+            dst[x][2] += b[q];
           }
         }
       }
