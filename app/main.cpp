@@ -29,21 +29,12 @@ int main(int argc, char** argv) {
   });
 
   app::registerCommonCommands(app);
-#ifdef FLAREKIT_WITH_RENDER
   app::registerRenderCommands(app);
-#endif
-#ifdef FLAREKIT_WITH_ACQUISITION
   app::registerAcquisitionCommands(app);
-#endif
-#ifdef FLAREKIT_WITH_MODEL
   app::registerModelCommands(app);
-#endif
-#ifdef FLAREKIT_WITH_FIT
   app::registerFitCommands(app);
-#endif
-#ifdef FLAREKIT_WITH_PREDICT
   app::registerPredictCommands(app);
-#endif
+  app::registerDemoCommand(app);
 
   try {
     app.parse(argc, argv);
