@@ -157,6 +157,13 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
         g.right = g.left;
         g.center_x = box.x + g.left;
       }
+      // The blob reaches over the outside fall-off (seeded at 2 px) and the smoothing: the outline
+      // lies that much inside its box. A seed outline too large makes a ring of Ib ≈ 0 around the
+      // ghost a local minimum when the ghost is brighter inside than at its border.
+      const double shrink = 2 + options.smoothing_px;
+      if (g.left > 2 * shrink) g.left -= shrink;
+      if (g.right > 2 * shrink) g.right -= shrink;
+      if (g.height > 2 * shrink) g.height -= shrink;
       g.curvature_left = g.curvature_right = model::kEllipseCurvature;
       g.border = {std::max(high, 1e-12), 0, 0};
       g.inside = {std::max(median, 0.0), 0, 0};

@@ -1,0 +1,145 @@
+// flarekit fit, fit-eval and bench fit as a user runs them: a small capture folder with known
+// ghosts (rendered with model/, with noise and ground truth under truth/) is fitted and the model
+// is checked against the truth; bad input gives exit code 2 and one line.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "common/exr.h"
+#include "common/testing.h"
+#include "model/flare_model.h"
+#include "model/model_renderer.h"
+#include "tests/cli_util.h"
+
+namespace flarekit {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::runFlarekit;
+using testing::TempDir;
+
+int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+
+// Two ghosts moving along the horizon as θ grows, like a pan rig's.
+std::vector<model::GhostParameters> ghostsAt(double theta) {
+  model::GhostParameters a;
+  a.center_x = 60 + 10 * theta;
+  a.center_y = 65;
+  a.left = a.right = 18 + theta;
+  a.height = 17;
+  a.border = {1.0, 0, 0};
+  a.inside = {0.5, 0, 0};
+  a.inside_falloff = 5;
+  a.outside_falloff = 2;
+  model::GhostParameters b = a;
+  b.center_x = 150 - 8 * theta;
+  b.left = b.right = b.height = 10;
+  b.border = {0.4, 0, 0};
+  b.inside = {0.6, 0, 0};
+  return {a, b};
+}
+
+void writeCapture(const fs::path& dir, int frames) {
+  const cv::Size size(200, 130);
+  fs::create_directories(dir / "frames");
+  fs::create_directories(dir / "truth");
+  nlohmann::json m = {{"format", "flarekit.capture"}, {"version", 1}, {"status", "complete"},
+                      {"lens", {{"name", "test lens"}}},
+                      {"camera", {{"description", "test"}, {"iso", 100}, {"f_number", 8},
+                                  {"exposures_s", {1.0}}}},
+                      {"light", "test light"},
+                      {"image", {{"width", size.width}, {"height", size.height}, {"channels", "Y"},
+                                 {"pixel_pitch_um", 10}}},
+                      {"plan", {{"step_deg", 0.2}}},
+                      {"truth", true}};
+  m["frames"] = nlohmann::json::array();
+  cv::theRNG().state = 11;
+  for (int i = 0; i < frames; ++i) {
+    const double theta = 0.2 * i;
+    const auto ghosts = ghostsAt(theta);
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d", i);
+    ExrImage truth_ghosts;
+    cv::Mat clean = cv::Mat::zeros(size, CV_32F);
+    for (size_t g = 0; g < ghosts.size(); ++g) {
+      std::vector<model::GhostParameters> one = {ghosts[g]};
+      cv::Mat img = model::renderGhosts(one, size, 1);
+      clean += img;
+      truth_ghosts.layers.push_back({"ghost." + std::to_string(g), img});
+    }
+    cv::Mat noise(size, CV_32F);
+    cv::randn(noise, 0, 0.01);
+    ExrAttributes attrs;
+    attrs["flarekit.angle_deg"] = theta;
+    writeExr(dir / "frames" / (std::string(name) + ".exr"), clean + noise, attrs);
+    writeExr(dir / "truth" / (std::string(name) + ".exr"), clean, attrs);
+    truth_ghosts.attributes = attrs;
+    writeExr(dir / "truth" / (std::string(name) + ".ghosts.exr"), truth_ghosts);
+    m["frames"].push_back({{"index", i}, {"angle_deg", theta},
+                           {"file", "frames/" + std::string(name) + ".exr"},
+                           {"truth_file", "truth/" + std::string(name) + ".exr"},
+                           {"ghosts_file", "truth/" + std::string(name) + ".ghosts.exr"}});
+  }
+  std::ofstream(dir / "manifest.json") << m.dump(2);
+}
+
+TEST(CliFit, FitsAndEvaluatesASmallCapture) {
+  TempDir dir;
+  writeCapture(dir / "capture", 12);
+  const std::string model = (dir / "model.json").string();
+  auto fit = runFlarekit({"-q", "fit", (dir / "capture").string(), "--out", model, "--report",
+                          (dir / "report").string()});
+  ASSERT_EQ(fit.exit_code, 0) << fit.err;
+  const model::FlareModel m = model::FlareModel::load(model);
+  EXPECT_EQ(m.ghosts.size(), 2u);
+  EXPECT_TRUE(fs::exists(dir / "report" / "summary.json"));
+  auto eval = runFlarekit({"-q", "fit-eval", model, (dir / "capture").string(), "--json"});
+  ASSERT_EQ(eval.exit_code, 0) << eval.err;
+  const auto j = nlohmann::json::parse(eval.out);
+  EXPECT_GE(j["recall"].get<double>(), 0.95) << eval.out;
+  EXPECT_GE(j["precision"].get<double>(), 0.95);
+  EXPECT_GE(j["median_psnr_db"].get<double>(), 32);
+  EXPECT_LE(j["median_centroid_error_px"].get<double>(), 0.5);
+}
+
+TEST(CliFit, HeldOutFramesThroughThePolynomials) {
+  TempDir dir;
+  writeCapture(dir / "capture", 12);
+  const std::string model = (dir / "model.json").string();
+  auto fit = runFlarekit({"-q", "fit", (dir / "capture").string(), "--out", model, "--holdout", "odd"});
+  ASSERT_EQ(fit.exit_code, 0) << fit.err;
+  auto eval = runFlarekit({"-q", "fit-eval", model, (dir / "capture").string(), "--frames", "odd", "--json"});
+  ASSERT_EQ(eval.exit_code, 0) << eval.err;
+  const auto j = nlohmann::json::parse(eval.out);
+  EXPECT_EQ(j["frames_evaluated"].get<int>(), 6);
+  EXPECT_GE(j["median_psnr_db"].get<double>(), 30) << eval.out;
+}
+
+TEST(CliFit, BadInputGivesOneLineAndExitTwo) {
+  TempDir dir;
+  writeCapture(dir / "capture", 4);
+  // A corrupt frame.
+  std::ofstream(dir / "capture/frames/frame_0002.exr", std::ios::trunc) << "garbage";
+  auto r = runFlarekit({"fit", (dir / "capture").string(), "--out", (dir / "m.json").string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(lineCount(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("frame_0002.exr"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "m.json"));
+  // An EXR stack without angles.
+  writeExr(dir / "plain.exr", cv::Mat::ones(10, 10, CV_32F));
+  r = runFlarekit({"fit", (dir / "plain.exr").string(), "--out", (dir / "m.json").string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("angle"), std::string::npos) << r.err;
+  // An unknown optimizer.
+  r = runFlarekit({"fit", (dir / "capture").string(), "--out", (dir / "m.json").string(),
+                   "--optimizer", "newton"});
+  EXPECT_EQ(r.exit_code, 2);
+}
+
+}  // namespace
+}  // namespace flarekit
