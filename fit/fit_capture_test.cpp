@@ -1,0 +1,124 @@
+// Tests of the capture-level pieces: options, polynomials, extrapolation, the model built from
+// tracks, and a whole synthetic stack fitted end to end in memory.
+#include "fit/fit_capture.h"
+
+#include <gtest/gtest.h>
+
+#include "model/model_renderer.h"
+
+namespace flarekit::fit {
+namespace {
+
+TEST(FitOptions, DefaultsAreValid) {
+  std::string error;
+  EXPECT_TRUE(FitOptions{}.IsValid(&error)) << error;
+  EXPECT_TRUE(DetectionOptions{}.IsValid(&error)) << error;
+  EXPECT_TRUE(TrackingOptions{}.IsValid(&error)) << error;
+  FitOptions bad;
+  bad.threads = 0;
+  EXPECT_FALSE(bad.IsValid(&error));
+}
+
+TEST(FitPolynomial, ReproducesAQuadraticInDegrees) {
+  std::vector<double> a, v;
+  for (double t = 10; t <= 20; t += 0.5) {
+    a.push_back(t);
+    v.push_back(3 - 0.5 * t + 0.02 * t * t);
+  }
+  const auto p = fitPolynomial(a, v, 2);
+  ASSERT_EQ(p.coefficients.size(), 3u);
+  EXPECT_NEAR(p.coefficients[0], 3, 1e-8);
+  EXPECT_NEAR(p.coefficients[1], -0.5, 1e-9);
+  EXPECT_NEAR(p.coefficients[2], 0.02, 1e-10);
+  // Fewer points than the degree needs: the degree drops.
+  EXPECT_EQ(fitPolynomial({1.0}, {4.0}, 2).coefficients.size(), 1u);
+}
+
+TEST(Extrapolate, FollowsALinearTrack) {
+  std::vector<double> a;
+  std::vector<model::GhostParameters> fits;
+  for (int i = 0; i < 8; ++i) {
+    model::GhostParameters g;
+    g.center_x = 100 + 5 * i;
+    g.center_y = 50;
+    a.push_back(0.2 * i);
+    fits.push_back(g);
+  }
+  const auto next = extrapolate(a, fits, 1.6, 8, 2);
+  EXPECT_NEAR(next.center_x, 140, 1e-6);
+  EXPECT_NEAR(next.center_y, 50, 1e-9);
+}
+
+TEST(BuildFlareModel, PolynomialsStayWithinBoundsAndAutoDegreeIsLowForLinearData) {
+  GhostTrackFit t;
+  t.id = 4;
+  for (int i = 0; i < 20; ++i) {
+    model::GhostParameters g;
+    g.center_x = 100 + 3 * i;
+    g.center_y = 60;
+    // Ii near its bound 0 and noisy: a degree-2 fit would dip below 0 inside the range.
+    g.inside = {i % 2 ? 0.0 : 0.02, 0, 0};
+    t.angles_deg.push_back(0.2 * i);
+    t.fits.push_back(g);
+    t.residual_rms.push_back(0);
+    t.peak.push_back(1);
+    t.unexplained.push_back(false);
+  }
+  model::CaptureInfo info;
+  info.camera = info.lens = info.light = "test";
+  info.f_number = info.iso = info.exposure_s = info.pixel_pitch_um = info.angle_step_deg = 1;
+  info.image_size = {200, 120};
+  for (int degree : {2, -1}) {
+    const model::FlareModel m = buildFlareModel({t}, info, 1, degree);
+    std::string error;
+    EXPECT_TRUE(m.IsValid(&error)) << error;
+    EXPECT_NEAR(m.ghosts[0].parameters[model::param::kMx].evaluate(1.0), 115, 1e-6);
+  }
+  const model::FlareModel automatic = buildFlareModel({t}, info, 1, -1);
+  EXPECT_LE(automatic.ghosts[0].parameters[model::param::kMx].coefficients.size(), 2u);
+}
+
+TEST(FitCapture, RecoversMovingGhostsInMemory) {
+  FrameStack stack;
+  stack.size = {160, 100};
+  stack.channels = 1;
+  stack.info.camera = stack.info.lens = stack.info.light = "test";
+  stack.info.f_number = stack.info.iso = stack.info.exposure_s = stack.info.pixel_pitch_um = 1;
+  stack.info.angle_step_deg = 0.25;
+  stack.info.image_size = stack.size;
+  cv::theRNG().state = 5;
+  for (int i = 0; i < 9; ++i) {
+    const double theta = 0.25 * i;
+    model::GhostParameters g;
+    g.center_x = 50 + 8 * theta;
+    g.center_y = 50;
+    g.left = g.right = 15;
+    g.height = 14;
+    g.border = {1, 0, 0};
+    g.inside = {0.4, 0, 0};
+    std::vector<model::GhostParameters> one = {g};
+    Frame f;
+    f.index = i;
+    f.angle_deg = theta;
+    f.image = model::renderGhosts(one, stack.size, 1);
+    cv::Mat noise(stack.size, CV_32F);
+    cv::randn(noise, 0, 0.01);
+    f.image += noise;
+    f.valid = cv::Mat(stack.size, CV_8U, cv::Scalar(255));
+    stack.frames.push_back(f);
+  }
+  FitOptions options;
+  options.progress = false;
+  const FitResult r = fitCapture(stack, options);
+  ASSERT_EQ(r.model.ghosts.size(), 1u);
+  const auto at = r.model.ghostsAt(1.0);
+  ASSERT_EQ(at.size(), 1u);
+  EXPECT_NEAR(at[0].parameters.center_x, 58, 0.1);
+  EXPECT_NEAR(at[0].parameters.left, 15, 0.2);
+  EXPECT_NEAR(at[0].parameters.border[0], 1, 0.03);
+  EXPECT_TRUE(r.summary.unexplained.empty());
+  EXPECT_FALSE(r.summary.BriefReport().empty());
+}
+
+}  // namespace
+}  // namespace flarekit::fit
