@@ -242,7 +242,10 @@ class CaptureFitter {
 
   FitResult run() {
     const auto t0 = Clock::now();
-    Progress progress("fit", 2 * static_cast<long long>(positions_.size()));
+    std::ostringstream silent;
+    Progress progress = options_.progress
+                            ? Progress("fit", 2 * static_cast<long long>(positions_.size()))
+                            : Progress("fit", 2 * static_cast<long long>(positions_.size()), silent, false);
     // Forward sweep: track and detect.
     for (int pos = 0; pos < static_cast<int>(positions_.size()); ++pos) {
       fitFrame(pos, /*forward=*/true);
