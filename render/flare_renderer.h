@@ -20,8 +20,8 @@
 // Geometry (shared/DESIGN.md, Conventions): the optical axis meets the image at (W/2, H/2),
 // pixel (i, j) is centred at (i + 0.5, j + 0.5), x right, y down, square pixels. θ > 0 moves the
 // light's image towards −x; the roll φ turns the light direction about the optical axis so the
-// light's image sits on the ray from the centre at image angle 180° + φ (y down: positive φ turns
-// clockwise on screen). The iris keeps its orientation (the camera does not roll).
+// light's image sits on the ray from the centre at 180° + φ measured counter-clockwise on screen
+// (positive φ turns the flare counter-clockwise as displayed, as model/ and predict/ do). The iris keeps its orientation (the camera does not roll).
 //
 // Threading: renderFlare may be called from several threads at once; each call uses TBB inside.
 

@@ -55,9 +55,11 @@ TEST(FlareRenderer, LightImageFollowsTheAngleConventions) {
   const double pitch = 36.0 / 240;
   EXPECT_NEAR(left.light_image_px.x, 120 - 99.24 * std::tan(5 * M_PI / 180) / pitch, 2.0);
   EXPECT_NEAR(left.light_image_px.y, 80, 0.05);
-  const FlareImage up = renderFlare(lens, {5, 90}, o);
-  EXPECT_NEAR(up.light_image_px.x, 120, 0.05);
-  EXPECT_LT(up.light_image_px.y, 80 - 20);
+  // Roll turns counter-clockwise as displayed (y down), as in model/ and predict/: at φ = 90° the
+  // light's image is below the centre.
+  const FlareImage down = renderFlare(lens, {5, 90}, o);
+  EXPECT_NEAR(down.light_image_px.x, 120, 0.05);
+  EXPECT_GT(down.light_image_px.y, 80 + 20);
 }
 
 TEST(FlareRenderer, TheLightSourceIsFarBrighterThanItsGhosts) {

@@ -56,8 +56,10 @@ CompiledPath compilePath(const Lens& lens, const std::vector<PathEvent>& path,
 }
 
 cv::Vec3d lightDirection(double angle_rad, double roll_rad) {
+  // Positive roll turns the light's image counter-clockwise as displayed (y down), the sense of
+  // model/'s ViewTransform and predict/'s geometry, so that one φ means one direction everywhere.
   const double s = std::sin(angle_rad);
-  return {-s * std::cos(roll_rad), -s * std::sin(roll_rad), std::cos(angle_rad)};
+  return {-s * std::cos(roll_rad), s * std::sin(roll_rad), std::cos(angle_rad)};
 }
 
 void TracedRays::resize(int count) {
