@@ -228,7 +228,9 @@ FrameStack loadCapture(const fs::path& folder, const FrameLoadOptions& options) 
                           " says " + fmt(*a) + "°");
     if (auto t = e.find("truth_file")) f.truth_file = folder / t->string();
     if (auto g = e.find("ghosts_file")) f.ghosts_file = folder / g->string();
-    if (f.truth_file.empty() || f.ghosts_file.empty() || !fs::exists(f.ghosts_file)) truth = false;
+    // Newer captures keep the per-ghost layers ("ghost.<id>.*") in the truth file itself.
+    if (f.ghosts_file.empty()) f.ghosts_file = f.truth_file;
+    if (f.truth_file.empty() || !fs::exists(f.truth_file) || !fs::exists(f.ghosts_file)) truth = false;
     stack.frames.push_back(std::move(f));
   }
   stack.has_truth = truth;

@@ -29,7 +29,8 @@ struct Frame {
   cv::Mat image;                      // CV_32FC1 or CV_32FC3 linear radiance; non-finite set to 0
   cv::Mat valid;                      // CV_8U: 255 where the pixel is finite and not saturated
   std::filesystem::path truth_file;   // noise-free radiance (simulated captures), else empty
-  std::filesystem::path ghosts_file;  // per-ghost ground truth layers, else empty
+  std::filesystem::path ghosts_file;  // per-ghost ground truth layers ("ghost.<id>.*": a file of its
+                                      // own, or the truth file itself), else empty
 };
 
 struct FrameStack {
