@@ -133,9 +133,12 @@ namespace {
 
 bool polynomialWithinBounds(const model::Polynomial& p, int index, int channels, double lo, double hi) {
   const auto b = model::parameterBounds(index, channels);
-  for (int i = 0; i <= 64; ++i) {
-    const double v = p.evaluate(lo + (hi - lo) * i / 64.0);
-    if (!std::isfinite(v) || v < b.lower || v > b.upper) return false;
+  // A small margin: the model file's own check samples the range with its own rounding.
+  const double margin_lo = 1e-6 * std::max(1.0, std::abs(b.lower));
+  const double margin_hi = b.upper >= model::kUnbounded ? 0 : 1e-6 * std::max(1.0, std::abs(b.upper));
+  for (int i = 0; i <= 256; ++i) {
+    const double v = p.evaluate(lo + (hi - lo) * i / 256.0);
+    if (!std::isfinite(v) || v < b.lower + margin_lo || v > b.upper - margin_hi) return false;
   }
   return true;
 }
