@@ -199,6 +199,15 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
       // range (degree 0, the mean of in-bounds values, always does).
       while (!polynomialWithinBounds(p, k, channels, g.angle_min_deg, g.angle_max_deg) && d > 0)
         p = fitPolynomial(t.angles_deg, v, --d);
+      // A constant at a bound (fits that ran into it) is moved a hair inside, where the model
+      // file's check accepts it whatever its rounding.
+      if (d == 0) {
+        const auto b = model::parameterBounds(k, channels);
+        const double lo = b.lower + 1e-6 * std::max(1.0, std::abs(b.lower));
+        const double hi = b.upper >= model::kUnbounded ? b.upper : b.upper - 1e-6 * std::max(1.0, std::abs(b.upper));
+        p.coefficients.resize(1);
+        p.coefficients[0] = std::clamp(p.coefficients[0], lo, hi);
+      }
       g.parameters.push_back(p);
     }
     m.ghosts.push_back(std::move(g));
