@@ -138,8 +138,12 @@ bool isValid(const GhostParameters& p, std::string* error) {
     const std::string name = parameterName(k, p.channels);
     if (!std::isfinite(v[k])) return fail(name + " is not finite");
     if (v[k] < b.lower || v[k] > b.upper) {
-      std::string range = "[" + formatNumber(b.lower) + ", " +
-                          (b.upper == kUnbounded ? std::string("inf") : formatNumber(b.upper)) + "]";
+      // Built by appends: GCC 12 reports a false -Wrestrict for "[" + std::string temporaries.
+      std::string range = "[";
+      range.append(formatNumber(b.lower))
+          .append(", ")
+          .append(b.upper == kUnbounded ? std::string("inf") : formatNumber(b.upper))
+          .append("]");
       return fail(name + " = " + formatNumber(v[k]) + " is outside " + range);
     }
   }
