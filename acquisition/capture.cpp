@@ -198,10 +198,17 @@ Json Session::newManifest() const {
                  {"read_noise_e", merge_.read_noise_e}};
   m["head"] = dev_.head->describe();
   m["light"] = rig_.light;
+  if (rig_.light_illuminance_lux > 0) m["light_illuminance_lux"] = rig_.light_illuminance_lux;
+  // The merged value at which the longest exposure clips (merged = electrons/s / output_scale):
+  // prediction expresses flare as a fraction of the camera's white level with it.
+  const double t_max = *std::max_element(plan_.exposures_s.begin(), plan_.exposures_s.end());
+  double clip_e = (white - rig_.sensor.black_level_dn) * merge_.gain_e_per_dn;
+  if (rig_.sensor.full_well_e > 0) clip_e = std::min(clip_e, rig_.sensor.full_well_e);
   m["image"] = {{"width", 0},
                 {"height", 0},
                 {"channels", rig_.sensor.cfa == Cfa::kMono ? "Y" : "RGB"},
                 {"pixel_pitch_um", pixel_pitch_um_},
+                {"clip_level", clip_e / (t_max * merge_.output_scale)},
                 {"pixel_type", options_.half_frames ? "half" : "float"},
                 {"units", rig_.camera_driver == CameraDriver::kSimulated
                               ? "relative irradiance (render units)"

@@ -230,12 +230,13 @@ Rig loadRig(const std::filesystem::path& path) {
   ConfigNode root = loadTomlFile(path);
   Rig rig;
   rig.file = path;
-  root.checkKnownKeys({"name", "description", "light", "head", "camera", "sensor", "simulation",
+  root.checkKnownKeys({"name", "description", "light", "light_illuminance_lux", "head", "camera", "sensor", "simulation",
                        "faults", "capture"});
   rig.name = root["name"].string();
   if (rig.name.empty()) root["name"].fail("must not be empty");
   rig.description = root.string("description", "");
   rig.light = root.string("light", "");
+  rig.light_illuminance_lux = nonNegative(root, "light_illuminance_lux", 0);
   parseHead(root["head"], rig);
   parseCamera(root["camera"], rig);
   if (root.has("sensor")) parseSensor(root["sensor"], rig);

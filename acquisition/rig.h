@@ -124,6 +124,10 @@ struct Rig {
   std::string name;
   std::string description;
   std::string light;  // description of the light source (metadata)
+  // Illuminance the light gives at the lens, lux, as measured with a lux meter at the camera's
+  // position (0 = not measured). Recorded in the manifest and the flare model: it is l_F·α_F of
+  // Walch 2018 Eq. 2, the reference prediction scales each scene light's flare against.
+  double light_illuminance_lux = 0;
   HeadDriver head_driver = HeadDriver::kSimulated;
   CameraDriver camera_driver = CameraDriver::kSimulated;
   SimulatedHeadConfig simulated_head;

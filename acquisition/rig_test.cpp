@@ -31,6 +31,7 @@ TEST(Rig, ShippedRigsLoad) {
   EXPECT_TRUE(sim.simulated());
   EXPECT_EQ(sim.simulation.width_px, 320);
   EXPECT_EQ(sim.capture.exposures_s, (std::vector<double>{0.25, 1, 4}));
+  EXPECT_GT(sim.light_illuminance_lux, 0);  // the demo's predictions are calibrated by it
 }
 
 TEST(Rig, FindRigByName) {
@@ -82,6 +83,8 @@ TEST(Rig, ErrorsNameFileKeyAndProblem) {
   EXPECT_NE(e.find("bad.toml"), std::string::npos) << e;
   e = errorOf(kGpioRig + "[faults]\ncamera_transient_probability = 0.1\n");
   EXPECT_NE(e.find("faults"), std::string::npos) << e;
+  e = errorOf("light_illuminance_lux = -5\n" + kGpioRig);
+  EXPECT_NE(e.find("light_illuminance_lux"), std::string::npos) << e;
   // Every message is one line.
   EXPECT_EQ(e.find('\n'), std::string::npos);
 }

@@ -37,7 +37,7 @@ void registerDemoCommand(CLI::App& app) {
   struct Options {
     std::string out = "flarekit-demo";
     std::string rig = "sim-heliar";
-    std::string scene = "predict/examples/stage.json";
+    std::string scene = "predict/examples/stage_100mm.json";
     int threads = 0;
   };
   auto o = std::make_shared<Options>();

@@ -28,7 +28,8 @@ void registerPredictCommands(CLI::App& app) {
   cmd->add_option("--width", o->predict.image_width_px, "Image width in pixels (0: the model's capture width)")
       ->capture_default_str();
   cmd->add_option("--capture-illuminance", o->predict.capture_illuminance_lux,
-                  "l·α of the capture's light at the camera, lux (Walch 2018 Eq. 2)")
+                  "l·α of the capture's light at the lens, lux (Walch 2018 Eq. 2); 0 = the value the model "
+                  "records (from the rig's light_illuminance_lux)")
       ->capture_default_str();
   cmd->add_option("--severity", o->estimator,
                   "Estimator for ranking, map and timeline: min, max, sum, mean, log_average_ratio, "

@@ -206,6 +206,11 @@ FrameStack loadCapture(const fs::path& folder, const FrameLoadOptions& options) 
   const std::string channels = image.string("channels", "Y");
   if (channels != "Y" && channels != "RGB") image["channels"].fail("must be \"Y\" or \"RGB\"");
   info.pixel_pitch_um = image.number("pixel_pitch_um", 0);
+  info.clip_level = image.number("clip_level", 0);
+  info.light_illuminance_lux = root.number("light_illuminance_lux", 0);
+  if (!(info.clip_level >= 0) || !std::isfinite(info.clip_level)) image["clip_level"].fail("must be ≥ 0");
+  if (!(info.light_illuminance_lux >= 0) || !std::isfinite(info.light_illuminance_lux))
+    root["light_illuminance_lux"].fail("must be ≥ 0");
   if (auto plan = root.find("plan")) info.angle_step_deg = plan->number("step_deg", 0);
   ConfigNode frames = root["frames"];
   if (frames.size() == 0) frames.fail("lists no frames");

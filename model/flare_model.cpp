@@ -37,7 +37,8 @@ std::string text(const ConfigNode& node) {
 CaptureInfo parseCapture(const ConfigNode& c) {
   if (!c.isObject()) c.fail("must be a table");
   c.checkKnownKeys({"camera", "lens", "f_number", "iso", "exposure_s", "light", "image_width",
-                    "image_height", "pixel_pitch_um", "angle_step_deg"});
+                    "image_height", "pixel_pitch_um", "angle_step_deg", "light_illuminance_lux",
+                    "clip_level"});
   CaptureInfo info;
   info.camera = text(c["camera"]);
   info.lens = text(c["lens"]);
@@ -54,6 +55,8 @@ CaptureInfo parseCapture(const ConfigNode& c) {
   }
   info.pixel_pitch_um = positiveNumber(c["pixel_pitch_um"]);
   info.angle_step_deg = positiveNumber(c["angle_step_deg"]);
+  if (c.has("light_illuminance_lux")) info.light_illuminance_lux = positiveNumber(c["light_illuminance_lux"]);
+  if (c.has("clip_level")) info.clip_level = positiveNumber(c["clip_level"]);
   return info;
 }
 
@@ -178,6 +181,9 @@ bool FlareModel::IsValid(std::string* error) const {
       !std::isfinite(c.exposure_s) || !std::isfinite(c.pixel_pitch_um) || !std::isfinite(c.angle_step_deg))
     return fail("capture: f_number, iso, exposure_s, pixel_pitch_um and angle_step_deg must be positive");
   if (c.image_size.width <= 0 || c.image_size.height <= 0) return fail("capture: image size must be positive");
+  if (!(c.light_illuminance_lux >= 0) || !std::isfinite(c.light_illuminance_lux) || !(c.clip_level >= 0) ||
+      !std::isfinite(c.clip_level))
+    return fail("capture: light_illuminance_lux and clip_level must be positive (or 0 = not recorded)");
   if (channels != 1 && channels != 3) return fail("channels must be 1 or 3");
   std::set<int> ids;
   for (size_t i = 0; i < ghosts.size(); ++i) {
@@ -205,6 +211,8 @@ nlohmann::json FlareModel::toJson() const {
                   {"image_height", capture.image_size.height},
                   {"pixel_pitch_um", capture.pixel_pitch_um},
                   {"angle_step_deg", capture.angle_step_deg}};
+  if (capture.light_illuminance_lux > 0) j["capture"]["light_illuminance_lux"] = capture.light_illuminance_lux;
+  if (capture.clip_level > 0) j["capture"]["clip_level"] = capture.clip_level;
   j["channels"] = channels;
   nlohmann::json list = nlohmann::json::array();
   for (const GhostTrack& g : ghosts) {

@@ -52,6 +52,13 @@ struct CaptureInfo {
   cv::Size image_size;         // capture size, pixels (> 0 each)
   double pixel_pitch_um = 0;   // sensor pixel pitch, micrometres (> 0)
   double angle_step_deg = 0;   // rig step between captures, degrees (> 0)
+  // Optional calibration (0 = not recorded; key left out of the file):
+  // the illuminance the capture's light gave at the lens, lux: l_F·α_F of Walch 2018 Eq. 2.
+  double light_illuminance_lux = 0;
+  // the model value at which a frame exposed for exposure_s at this f-number and ISO clips (the
+  // sensor's white level in the capture's units): prediction divides by it so that its overlays
+  // are fractions of the scene camera's white level.
+  double clip_level = 0;
 };
 
 // p(θ) = Σ coefficients[k]·θ^k.

@@ -92,8 +92,8 @@ bool PredictOptions::IsValid(std::string* error) const {
     return false;
   };
   if (image_width_px < 0 || image_width_px > 16384) return fail("image_width_px must be in [0, 16384]");
-  if (!(capture_illuminance_lux > 0) || !std::isfinite(capture_illuminance_lux))
-    return fail("capture_illuminance_lux must be positive");
+  if (!(capture_illuminance_lux >= 0) || !std::isfinite(capture_illuminance_lux))
+    return fail("capture_illuminance_lux must be ≥ 0 (0 = the model's)");
   if (map_angle_steps < 2 || map_angle_steps > 180) return fail("map_angle_steps must be in [2, 180]");
   if (map_roll_steps < 2 || map_roll_steps > 360) return fail("map_roll_steps must be in [2, 360]");
   if (map_image_width_px < 16 || map_image_width_px > 4096) return fail("map_image_width_px must be in [16, 4096]");
@@ -132,12 +132,25 @@ cv::Mat sceneImage(const Scene& scene, cv::Size size) {
   return out;
 }
 
+double captureIlluminance(const model::FlareModel& m, const PredictOptions& options, std::string* source) {
+  auto from = [&](const char* what, double lux) {
+    if (source) *source = what;
+    return lux;
+  };
+  if (options.capture_illuminance_lux > 0) return from("option", options.capture_illuminance_lux);
+  if (m.capture.light_illuminance_lux > 0) return from("model", m.capture.light_illuminance_lux);
+  return from("assumed", kAssumedCaptureIlluminanceLux);
+}
+
 cv::Mat renderLight(const model::FlareModel& m, double model_angle_deg, double model_roll_deg, double brightness,
                     const cv::Vec3d& color, cv::Size image_size, const model::RenderOptions& options) {
   std::vector<model::GhostParameters> ghosts;
   for (const auto& g : m.ghostsAt(model_angle_deg)) ghosts.push_back(g.parameters);
   // Walch 2018 §3.4.1: the rendering is rotated about the image centre to the light's roll.
   cv::Mat img = model::renderGhosts(ghosts, image_size, m.channels, options, m.viewAt(model_roll_deg, image_size));
+  // A model value of clip_level clips in a capture frame; after Eq. 2's B (the scene's exposure
+  // against the capture's), model·B / clip_level is the fraction of the scene camera's white.
+  if (m.capture.clip_level > 0) brightness /= m.capture.clip_level;
   cv::Mat rgb;
   if (m.channels == 1) {
     cv::Mat planes[3] = {img * (brightness * color[0]), img * (brightness * color[1]), img * (brightness * color[2])};
@@ -165,7 +178,7 @@ cv::Mat renderLights(const model::FlareModel& m, const Scene& scene, const Camer
     p.illuminance_lux = Scene::illuminanceAt(light, pose);
     if (p.illuminance_lux > 0) {
       p.brightness = brightnessScale(captureExposure(m), sceneExposure(scene.camera),
-                                     {options.capture_illuminance_lux, p.illuminance_lux});
+                                     {captureIlluminance(m, options), p.illuminance_lux});
     }
     cv::Mat own;
     if (p.geometry.status == LightStatus::kInRange && p.illuminance_lux > 0) {
@@ -244,7 +257,8 @@ PredictionSummary analyze(const model::FlareModel& m, const Scene& scene, const 
   s.scene_name = scene.name;
   s.scene_file = scene.file;
   s.image_size = predictionImageSize(m, scene, options.image_width_px);
-  s.capture_illuminance_lux = options.capture_illuminance_lux;
+  s.capture_illuminance_lux = captureIlluminance(m, options, &s.capture_illuminance_source);
+  s.overlay_in_white_units = m.capture.clip_level > 0;
   const cv::Mat scene_img = sceneImage(scene, s.image_size);
 
   // Overlay, light by light (Walch 2018 §3.4.1: ghosts scaled by Eq. 2 and added).
@@ -378,6 +392,9 @@ std::string PredictionSummary::BriefReport() const {
   } else {
     o << "No light produces ghosts. ";
   }
+  if (capture_illuminance_source == "assumed")
+    o << "The model does not record its capture light's illuminance: " << cv::format("%.3g", capture_illuminance_lux)
+      << " lx assumed (--capture-illuminance), so absolute brightness is uncalibrated. ";
   o << "Overlay " << toString(map.estimator) << " = " << cv::format("%.4g", value(estimators, map.estimator));
   for (const auto& r : ratings)
     if (r.estimator == map.estimator && std::isfinite(r.percentile))
@@ -395,6 +412,8 @@ nlohmann::json toJson(const PredictionSummary& s) {
   j["scene"] = {{"name", s.scene_name}, {"file", s.scene_file.string()}};
   j["model_file"] = s.model_file.string();
   j["capture_illuminance_lux"] = s.capture_illuminance_lux;
+  j["capture_illuminance_source"] = s.capture_illuminance_source;
+  j["overlay_units"] = s.overlay_in_white_units ? "fraction of the scene camera's white level" : "capture units";
   j["image_size"] = {s.image_size.width, s.image_size.height};
   j["severity_estimator"] = toString(s.map.estimator);
   j["estimators"] = toJson(s.estimators);

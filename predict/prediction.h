@@ -25,15 +25,19 @@
 
 namespace flarekit::predict {
 
+// The l_F·α_F assumed when neither the model nor the options give one: a placeholder of the right
+// order for a fibre-optic source (~1e6 cd/m²) seen under ~1e-5 sr on the rig.
+inline constexpr double kAssumedCaptureIlluminanceLux = 10.0;
+
 struct PredictOptions {
   // Width of the predicted images, pixels (0 = the model's capture width); the height follows the
   // scene's sensor aspect ratio.
   int image_width_px = 0;
-  // l_F·α_F of Eq. 2: the illuminance the capture's light gave at the camera, lux (> 0). The model
-  // file does not record it, so set it to the capture light's measured value; the default, 10 lx,
-  // is only a placeholder of the right order for a fibre-optic source (~1e6 cd/m²) seen under
-  // ~1e-5 sr on the rig. Every B scales with 1 / this value.
-  double capture_illuminance_lux = 10.0;
+  // l_F·α_F of Eq. 2: the illuminance the capture's light gave at the lens, lux (≥ 0). 0 = the
+  // value the model records (the rig's light_illuminance_lux); a model without one falls back to
+  // kAssumedCaptureIlluminanceLux and the report says the absolute scale is assumed. Every B
+  // scales with 1 / this value.
+  double capture_illuminance_lux = 0;
   // The estimator shown in the severity map and timeline and used to rank lights.
   Estimator severity_estimator = Estimator::kMean;
   // Severity map grid: θ steps from 0 to the model's largest |θ|, φ steps all round (≥ 2 each).
@@ -95,7 +99,11 @@ struct PredictionSummary {
   std::string scene_name;
   std::filesystem::path scene_file, model_file, out_dir;
   cv::Size image_size;
-  double capture_illuminance_lux = 0;    // l_F·α_F assumed (PredictOptions)
+  double capture_illuminance_lux = 0;    // l_F·α_F used (captureIlluminance)
+  std::string capture_illuminance_source;  // "model", "option" or "assumed"
+  // Overlay units: true = fractions of the scene camera's white level (the model records its
+  // capture's clip level); false = the capture's own units (uncalibrated).
+  bool overlay_in_white_units = false;
   std::vector<LightPrediction> lights;   // in scene order (rank tells the order of severity)
   Estimators estimators;                 // of the whole overlay over the scene
   std::vector<RatedEstimator> ratings;   // one per estimator, allEstimators() order
@@ -114,7 +122,14 @@ cv::Mat renderOverlay(const model::FlareModel& model, const Scene& scene, const 
                       cv::Size image_size, const PredictOptions& options,
                       std::vector<LightPrediction>* lights = nullptr);
 
-// The overlay of one light of brightness `brightness` at model angle θ and roll φ (CV_32FC3).
+// The l_F·α_F prediction uses (lux) and where it comes from ("option", "model" or "assumed"; see
+// PredictOptions::capture_illuminance_lux).
+double captureIlluminance(const model::FlareModel& model, const PredictOptions& options,
+                          std::string* source = nullptr);
+
+// The overlay of one light of brightness `brightness` at model angle θ and roll φ (CV_32FC3), in
+// fractions of the white level when the model records its capture's clip level (the model's
+// values divided by it), else in the model's units.
 cv::Mat renderLight(const model::FlareModel& model, double model_angle_deg, double model_roll_deg,
                     double brightness, const cv::Vec3d& color, cv::Size image_size,
                     const model::RenderOptions& options);

@@ -82,7 +82,7 @@ TEST(PredictOptions, DefaultsAreValidAndBadValuesAreNot) {
   std::string error;
   EXPECT_TRUE(PredictOptions{}.IsValid(&error)) << error;
   PredictOptions o;
-  o.capture_illuminance_lux = 0;
+  o.capture_illuminance_lux = -1;
   EXPECT_FALSE(o.IsValid(&error));
   o = {};
   o.map_roll_steps = 1;
@@ -176,9 +176,43 @@ TEST(Prediction, OverlayScalesWithEq2AndLightsAdd) {
   EXPECT_NEAR(cv::sum(renderOverlay(m, a, a.camera.pose, size, o))[1], 2 * sum_a, 1e-4 * sum_a);
   // One stop more on the capture side (brighter reference) halves it.
   PredictOptions brighter = o;
-  brighter.capture_illuminance_lux *= 2;
+  brighter.capture_illuminance_lux = 2 * captureIlluminance(m, o);
   a.lights[0].intensity_cd /= 2;
   EXPECT_NEAR(cv::sum(renderOverlay(m, a, a.camera.pose, size, brighter))[1], 0.5 * sum_a, 1e-4 * sum_a);
+}
+
+TEST(Prediction, UsesTheCalibrationTheModelRecords) {
+  model::FlareModel m = oneGhostModel();
+  const Scene a = sceneWithLights({{-5, 0}});
+  const cv::Size size = predictionImageSize(m, a, 150);
+  PredictOptions o;
+  std::string source;
+  // Nothing recorded: the placeholder, said to be assumed.
+  EXPECT_EQ(captureIlluminance(m, o, &source), kAssumedCaptureIlluminanceLux);
+  EXPECT_EQ(source, "assumed");
+  const double assumed = cv::sum(renderOverlay(m, a, a.camera.pose, size, o))[1];
+  // The rig measured 4× the placeholder: every light's B is 4× smaller.
+  m.capture.light_illuminance_lux = 4 * kAssumedCaptureIlluminanceLux;
+  EXPECT_EQ(captureIlluminance(m, o, &source), m.capture.light_illuminance_lux);
+  EXPECT_EQ(source, "model");
+  const double measured = cv::sum(renderOverlay(m, a, a.camera.pose, size, o))[1];
+  EXPECT_NEAR(measured, assumed / 4, 1e-4 * assumed);
+  // The option overrides the model.
+  o.capture_illuminance_lux = kAssumedCaptureIlluminanceLux;
+  EXPECT_EQ(captureIlluminance(m, o, &source), kAssumedCaptureIlluminanceLux);
+  EXPECT_EQ(source, "option");
+  // A recorded clip level turns the overlay into fractions of white: the scene exposed as the
+  // capture with the capture's light shows the ghost's peak (intensity 1) at 1 / clip_level.
+  o.capture_illuminance_lux = 0;
+  m.capture.clip_level = 0.25;
+  Scene same = sceneWithLights({{-5, 0}});
+  same.camera.f_number = m.capture.f_number;
+  same.camera.iso = m.capture.iso;
+  same.camera.exposure_s = m.capture.exposure_s;
+  same.lights[0].intensity_cd = m.capture.light_illuminance_lux * 100;  // at 10 m
+  double peak = 0;
+  cv::minMaxLoc(renderOverlay(m, same, same.camera.pose, size, o).reshape(1), nullptr, &peak);
+  EXPECT_NEAR(peak, 1 / 0.25, 1e-3);
 }
 
 TEST(Prediction, AnalyzeRanksRatesAndMaps) {
@@ -238,7 +272,7 @@ TEST(Prediction, SeverityMapCellEqualsTheLightPlacedThere) {
   const Vec3 d = cameraDirectionFromAngles(theta, phi);  // camera frame = world (x, −y, −z) here
   s.lights[0].position = {10 * d[0], -10 * d[1], -10 * d[2]};
   // Brightness 1: the scene light gives the capture's l·α with the same exposure.
-  s.lights[0].intensity_cd = PredictOptions{}.capture_illuminance_lux * 100;
+  s.lights[0].intensity_cd = captureIlluminance(m, o) * 100;
   const cv::Mat overlay = renderOverlay(m, s, s.camera.pose, size, o);
   EXPECT_NEAR(computeEstimators(overlay, sceneImage(s, size)).mean, map.values[2][1], 1e-6);
 }

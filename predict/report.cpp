@@ -332,7 +332,14 @@ std::string reportHtml(const PredictionSummary& s, const model::FlareModel& m, c
     << fmt(c.f_number, "%.3g") << ", ISO " << fmt(c.iso, "%.0f") << ", " << fmt(c.exposure_s, "%.4g") << " s, light "
     << escape(c.light) << ", " << c.image_size.width << " x " << c.image_size.height << " px, pitch "
     << fmt(c.pixel_pitch_um, "%.3g") << " µm, step " << fmt(c.angle_step_deg, "%.3g") << "°; capture light l·α = "
-    << fmt(s.capture_illuminance_lux, "%.3g") << " lx (prediction option)</td></tr>"
+    << fmt(s.capture_illuminance_lux, "%.3g") << " lx ("
+    << (s.capture_illuminance_source == "model"    ? "measured on the rig, from the model"
+        : s.capture_illuminance_source == "option" ? "prediction option"
+                                                   : "ASSUMED: the model does not record it; absolute brightness is uncalibrated")
+    << "); flare in "
+    << (s.overlay_in_white_units ? "fractions of the scene camera's white level"
+                                 : "the capture's units (the model does not record its clip level)")
+    << "</td></tr>"
     << "<tr><th class=\"l\">model</th><td class=\"l\">" << m.ghosts.size() << " ghosts, " << m.channels
     << (m.channels == 1 ? " channel" : " channels") << ", sampled θ " << fmt(range.min_deg, "%.1f") << "° to "
     << fmt(range.max_deg, "%.1f") << "°</td></tr>"

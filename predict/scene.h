@@ -23,6 +23,8 @@
 //     ],
 //     "background": { "image": "bg.exr" },   // optional: HDR image (path relative to the scene)
 //     "background": { "level": 0.02 },       //   or a uniform linear level
+//     // Background values are the scene camera's linear signal as a fraction of its white level
+//     // (1 = clipping), the unit of the overlay when the model records its capture's clip level.
 //     "camera_path": [                        // optional: poses over time
 //       { "time_s": 0, "position": [...], "look_at": [...], "up": [...] }
 //     ]

@@ -173,6 +173,26 @@ TEST(CliPredict, GltfExampleMatchesTheJsonExample) {
               1e-5 * ja["estimators"]["mean"].get<double>());
 }
 
+// The demo predicts predict/examples/stage_100mm.json with the model it fitted on the sim-heliar
+// rig: the scene's camera must carry that rig's lens, and its lights must cover the cases a light
+// planner meets (in the frame, beside it, out of the model's range, behind the camera).
+TEST(CliPredict, DemoSceneMatchesTheDemoRigsLens) {
+  auto lens = runFlarekit({"lens-info", (kSource / "lenses/heliar_tronnier.json").string(), "--json"});
+  ASSERT_EQ(lens.exit_code, 0) << lens.err;
+  const json scene = json::parse(readFile(kSource / "predict/examples/stage_100mm.json"));
+  EXPECT_NEAR(scene["camera"]["focal_length_mm"].get<double>(), json::parse(lens.out)["efl_mm"].get<double>(), 1.0);
+  TempDir dir;
+  auto r = runFlarekit({"predict", kModel.string(), "--scene", (kSource / "predict/examples/stage_100mm.json").string(),
+                        "--out", (dir / "out").string(), "--map-angles", "4", "--map-rolls", "4"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json e = json::parse(readFile(dir / "out/estimators.json"));
+  std::map<std::string, std::string> status;
+  for (const auto& l : e["lights"]) status[l["name"]] = l["status"];
+  for (const char* name : {"key spot", "practical lamp", "rim light", "window"}) EXPECT_EQ(status[name], "in range") << name;
+  EXPECT_EQ(status["flood (off-stage)"], "out of range");
+  EXPECT_EQ(status["follow spot (behind)"], "behind camera");
+}
+
 TEST(CliPredict, BadScenesExitTwoWithOneLine) {
   TempDir dir;
   const json good = json::parse(readFile(kScene));
