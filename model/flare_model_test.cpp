@@ -102,6 +102,10 @@ TEST(FlareModel, FileRoundTripIsExact) {
     for (auto& g : m.ghosts)
       for (auto& p : g.parameters) p.coefficients.push_back(tiny(rng) * 1e-4);
     m.ghosts[0].parameters[param::kMy].coefficients[0] = 100.1 + 1.0 / 3.0;
+    if (channels == 3) {  // the optional calibration (one model with it, one without)
+      m.capture.light_illuminance_lux = 40.0 / 3.0;
+      m.capture.clip_level = 0.006;
+    }
     const auto path = dir / ("model" + std::to_string(channels) + ".json");
     m.save(path);
     const FlareModel back = FlareModel::load(path);
@@ -113,6 +117,8 @@ TEST(FlareModel, FileRoundTripIsExact) {
     EXPECT_EQ(back.capture.lens, m.capture.lens);
     EXPECT_EQ(back.capture.image_size, m.capture.image_size);
     EXPECT_EQ(back.capture.exposure_s, m.capture.exposure_s);
+    EXPECT_EQ(back.capture.light_illuminance_lux, m.capture.light_illuminance_lux);
+    EXPECT_EQ(back.capture.clip_level, m.capture.clip_level);
     EXPECT_EQ(cv::norm(back.render(3, 10), m.render(3, 10), cv::NORM_INF), 0.0);
   }
 }
