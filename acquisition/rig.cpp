@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "common/config.h"
+#include "common/shipped_file.h"
 
 namespace flarekit::acquisition {
 namespace {
@@ -257,32 +258,22 @@ Rig loadRig(const std::filesystem::path& path) {
 
 std::filesystem::path findRig(const std::string& name_or_path) {
   namespace fs = std::filesystem;
-  fs::path p(name_or_path);
+  const fs::path p(name_or_path);
   if (fs::exists(p)) return p;
-  std::string file = p.has_extension() ? name_or_path : name_or_path + ".toml";
-  std::vector<fs::path> folders = {"rigs"};
-  if (const char* env = std::getenv("FLAREKIT_RIGS")) folders.insert(folders.begin(), env);
-#ifdef FLAREKIT_SOURCE_DIR
-  folders.push_back(fs::path(FLAREKIT_SOURCE_DIR) / "rigs");
-#endif
-  if (p.parent_path().empty())
-    for (const auto& f : folders)
-      if (fs::exists(f / file)) return f / file;
+  const std::string file = p.has_extension() ? name_or_path : name_or_path + ".toml";
+  if (p.parent_path().empty()) {
+    std::vector<fs::path> preferred;
+    if (const char* env = std::getenv("FLAREKIT_RIGS")) preferred.push_back(fs::path(env) / file);
+    if (auto found = findShippedFile(fs::path("rigs") / file, preferred)) return *found;
+  }
   throw InputError(name_or_path + ": no such rig file (give a path, or a name from rigs/ such as "
                                   "sim-heliar)");
 }
 
 std::filesystem::path resolveLensPath(const Rig& rig) {
-  namespace fs = std::filesystem;
-  const fs::path& lens = rig.simulation.lens;
-  if (lens.is_absolute()) return lens;
-  fs::path dir = rig.file.parent_path();
-  std::vector<fs::path> candidates = {dir / lens, dir.parent_path() / lens, lens};
-#ifdef FLAREKIT_SOURCE_DIR
-  candidates.push_back(fs::path(FLAREKIT_SOURCE_DIR) / lens);
-#endif
-  for (const auto& c : candidates)
-    if (fs::exists(c)) return c;
+  const std::filesystem::path& lens = rig.simulation.lens;
+  const std::filesystem::path dir = rig.file.parent_path();
+  if (auto found = findShippedFile(lens, {dir / lens, dir.parent_path() / lens})) return *found;
   throw InputError(rig.file.string(), "simulation.lens: no such lens file \"" + lens.string() +
                                           "\" (looked beside the rig file, in its parent folder "
                                           "and in the working folder)");

@@ -12,6 +12,7 @@
 #include "app/commands.h"
 #include "common/error.h"
 #include "common/log.h"
+#include "common/shipped_file.h"
 #include "fit/fit_capture.h"
 #include "fit/frames.h"
 #include "model/flare_model.h"
@@ -25,9 +26,7 @@ namespace fs = std::filesystem;
 
 // A file shipped with the project: relative to the working folder, else to the source tree.
 fs::path projectFile(const fs::path& relative) {
-  if (fs::exists(relative)) return relative;
-  fs::path in_source = fs::path(FLAREKIT_SOURCE_DIR) / relative;
-  if (fs::exists(in_source)) return in_source;
+  if (auto found = findShippedFile(relative)) return *found;
   throw InputError(relative.string() + ": not found (run from the FlareKit folder)");
 }
 
