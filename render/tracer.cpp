@@ -76,121 +76,208 @@ void TracedRays::resize(int count) {
 namespace {
 
 // Rays are traced in blocks, each event applied to the whole block in one loop over rays (struct
-// of arrays, branch-light so that the compiler can vectorise the arithmetic).
+// of arrays). The loops are branch-free so that the compiler vectorises them: every lane computes
+// both sides of each case and selects (the same IEEE operations as a scalar case analysis, so a
+// ray's result does not depend on its block), and every lane goes on computing after its ray
+// died (alive = 0): the state of dead rays is meaningless and never read. The one gather, the
+// reflectance lookup, has its own scalar loop between the vector loops.
 constexpr int kBlock = 64;
 
 // Slope β of the validity margins folded into r_rel (total internal reflection, missed spheres).
 constexpr double kValidityScale = 4.0;
 
+// The vector loops are also built for AVX2 (4 doubles a vector instead of SSE2's 2), chosen at
+// load time by the CPU. Without FMA the AVX2 code performs the same IEEE operations, so images do
+// not depend on the machine.
+#define FLAREKIT_VECTOR_LOOP __attribute__((target_clones("avx2", "default")))
+
+// Lane flags are doubles (1 = set) so that the masks have the width of the data they select.
 struct Block {
-  double px[kBlock], py[kBlock], pz[kBlock];
-  double dx[kBlock], dy[kBlock], dz[kBlock];
-  double t[kBlock], rr[kBlock], u[kBlock], v[kBlock];
-  bool alive[kBlock], stop_seen[kBlock];
+  alignas(64) double px[kBlock], py[kBlock], pz[kBlock];
+  alignas(64) double dx[kBlock], dy[kBlock], dz[kBlock];
+  alignas(64) double t[kBlock], rr[kBlock], u[kBlock], v[kBlock];
+  alignas(64) double alive[kBlock], stop_seen[kBlock];
+  // Scratch of one event: oriented unit normal and cos(incidence), reflectance.
+  alignas(64) double nx[kBlock], ny[kBlock], nz[kBlock], cos_i[kBlock];
+  alignas(64) float refl[kBlock];
 };
 
-void applyEvent(const CompiledEvent& e, Block& b, int count) {
-  const bool flat = e.radius == 0.0;
+// Moves every live ray of the block to the event's surface: sphere (on its vertex-side
+// hemisphere, extended past the rim) or plane. Records the stop crossing, or the normal and the
+// cosine of incidence for the optical events.
+template <bool kFlat, bool kStop>
+FLAREKIT_VECTOR_LOOP void intersect(const CompiledEvent& e, Block& b, int count) {
   const double R = e.radius;
   const double cz = e.z + R;  // centre of the sphere
+  const double ez = e.z, inv_semi = e.inv_semi;
+  const double miss_base = std::abs(R) * inv_semi;
+#pragma GCC ivdep
   for (int k = 0; k < count; ++k) {
-    if (!b.alive[k]) continue;
-    double s;
-    double nx = 0.0, ny = 0.0, nz = 1.0;
-    bool flat_here = flat;
-    if (flat) {
-      if (std::abs(b.dz[k]) < 1e-12) {
-        b.alive[k] = false;
-        continue;
-      }
-      s = (e.z - b.pz[k]) / b.dz[k];
-    } else {
+    const double px = b.px[k], py = b.py[k], pz = b.pz[k];
+    const double dx = b.dx[k], dy = b.dy[k], dz = b.dz[k];
+    double rr = b.rr[k];
+    // Plane (and the fallback of a missed sphere): the ray parameter to the vertex plane.
+    double s = (ez - pz) / dz;
+    bool plane_here = kFlat;
+    bool dies = std::abs(dz) < 1e-12;
+    if constexpr (!kFlat) {
       // |o + s d|² = R² with o = p − C; the root on the vertex side, (z − C_z)·R < 0.
-      const double ox = b.px[k], oy = b.py[k], oz = b.pz[k] - cz;
-      const double bb = ox * b.dx[k] + oy * b.dy[k] + oz * b.dz[k];
+      const double ox = px, oy = py, oz = pz - cz;
+      const double bb = ox * dx + oy * dy + oz * dz;
       const double cc = ox * ox + oy * oy + oz * oz - R * R;
       const double disc = bb * bb - cc;
-      if (disc < 0.0) {
-        // Missed the sphere: the ray passes outside every rim (r > |R| > semi-aperture), so it is
-        // not part of the ghost. Rather than dropping it (and with it every grid cell it
-        // touches), it goes on from the vertex plane with r_rel past |R|/semi-aperture, growing
-        // with the miss distance, so cells across the edge are clipped by interpolation.
-        if (std::abs(b.dz[k]) < 1e-12) {
-          b.alive[k] = false;
-          continue;
-        }
-        s = (e.z - b.pz[k]) / b.dz[k];
-        flat_here = true;
-        b.rr[k] = std::max(b.rr[k], std::abs(R) * e.inv_semi - kValidityScale * disc / (R * R));
-      } else {
-        const double sq = std::sqrt(disc);
-        const double s1 = -bb - sq;
-        s = ((oz + s1 * b.dz[k]) * R < 0.0) ? s1 : -bb + sq;
-      }
+      const bool miss = disc < 0.0;
+      const double sq = std::sqrt(std::max(disc, 0.0));
+      const double s1 = -bb - sq, s2 = -bb + sq;
+      const double s_hit = (oz + s1 * dz) * R < 0.0 ? s1 : s2;
+      // Missed the sphere: the ray passes outside every rim (r > |R| > semi-aperture), so it is
+      // not part of the ghost. Rather than dropping it (and with it every grid cell it
+      // touches), it goes on from the vertex plane with r_rel past |R|/semi-aperture, growing
+      // with the miss distance, so cells across the edge are clipped by interpolation.
+      const double rr_miss = std::max(rr, miss_base - kValidityScale * disc / (R * R));
+      s = miss ? s : s_hit;
+      rr = miss ? rr_miss : rr;
+      plane_here = miss;
+      dies = miss & dies;
     }
-    const double x = b.px[k] + s * b.dx[k];
-    const double y = b.py[k] + s * b.dy[k];
-    const double z = b.pz[k] + s * b.dz[k];
+    const double x = px + s * dx;
+    const double y = py + s * dy;
+    const double z = pz + s * dz;
+    const double r = std::sqrt(x * x + y * y);
+    b.alive[k] = dies ? 0.0 : b.alive[k];
     b.px[k] = x;
     b.py[k] = y;
     b.pz[k] = z;
-    const double r = std::sqrt(x * x + y * y);
-    if (e.kind == EventKind::kStop) {
-      if (!b.stop_seen[k]) {
-        b.u[k] = x * e.inv_semi;
-        b.v[k] = y * e.inv_semi;
-        b.stop_seen[k] = true;
-      } else {
-        // Later crossings of a ghost that passes the stop three times: the iris (as a circle)
-        // clips through r_rel (the aperture shape applies at the first crossing only).
-        b.rr[k] = std::max(b.rr[k], r * e.inv_semi);
-      }
-      continue;
-    }
-    b.rr[k] = std::max(b.rr[k], r * e.inv_semi);
-    if (!flat_here) {
-      nx = x / R;
-      ny = y / R;
-      nz = (z - cz) / R;  // unit normal, pointing to −z at the vertex
-    }
-    double cos_i = -(nx * b.dx[k] + ny * b.dy[k] + nz * b.dz[k]);
-    if (cos_i < 0.0) {  // orient the normal against the ray
-      nx = -nx;
-      ny = -ny;
-      nz = -nz;
-      cos_i = -cos_i;
-    }
-    const float refl = ReflectanceTables::lookup(e.reflectance, cos_i);
-    if (e.kind == EventKind::kReflect) {
-      b.dx[k] += 2.0 * cos_i * nx;
-      b.dy[k] += 2.0 * cos_i * ny;
-      b.dz[k] += 2.0 * cos_i * nz;
-      b.t[k] *= refl;
+    if constexpr (kStop) {
+      // Later crossings of a ghost that passes the stop three times: the iris (as a circle)
+      // clips through r_rel (the aperture shape applies at the first crossing only).
+      const bool first = b.stop_seen[k] == 0.0;
+      b.u[k] = first ? x * inv_semi : b.u[k];
+      b.v[k] = first ? y * inv_semi : b.v[k];
+      b.stop_seen[k] = 1.0;
+      b.rr[k] = first ? rr : std::max(rr, r * inv_semi);
     } else {
-      // Vector form of Snell's law.
-      const double eta = e.eta;
-      const double kk = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-      // Total internal reflection: past the critical angle (kk < 0) the ray leaves this path.
-      // r_rel carries the margin 1 − β·kk, which stays below 1 for every transmitted ray and
-      // crosses 1 exactly at the critical angle, so the rasterizer's interpolation puts the TIR
-      // edge of a ghost where it belongs instead of losing every grid cell that touches it. The
-      // ray itself goes on as the grazing refracted ray (kk = 0), continuous with its
-      // transmitted neighbours, so the cells across the edge keep a sensible shape.
-      b.rr[k] = std::max(b.rr[k], 1.0 - kValidityScale * kk);
-      const double f = eta * cos_i - std::sqrt(std::max(kk, 0.0));
-      double ndx = eta * b.dx[k] + f * nx;
-      double ndy = eta * b.dy[k] + f * ny;
-      double ndz = eta * b.dz[k] + f * nz;
-      if (kk < 0.0) {
-        const double inv = 1.0 / std::sqrt(ndx * ndx + ndy * ndy + ndz * ndz);
-        ndx *= inv;
-        ndy *= inv;
-        ndz *= inv;
+      b.rr[k] = std::max(rr, r * inv_semi);
+      double nx = 0.0, ny = 0.0, nz = 1.0;
+      if constexpr (!kFlat) {
+        // Unit normal, pointing to −z at the vertex.
+        nx = plane_here ? 0.0 : x / R;
+        ny = plane_here ? 0.0 : y / R;
+        nz = plane_here ? 1.0 : (z - cz) / R;
       }
-      b.dx[k] = ndx;
-      b.dy[k] = ndy;
-      b.dz[k] = ndz;
-      b.t[k] *= (1.0f - refl);
+      const double c = -(nx * dx + ny * dy + nz * dz);
+      const bool flip = c < 0.0;  // orient the normal against the ray
+      b.nx[k] = flip ? -nx : nx;
+      b.ny[k] = flip ? -ny : ny;
+      b.nz[k] = flip ? -nz : nz;
+      b.cos_i[k] = flip ? -c : c;
+    }
+  }
+}
+
+// Reflectances of the live rays (a table lookup each: a gather, kept out of the vector loops).
+void lookupReflectance(const CompiledEvent& e, Block& b, int count) {
+  for (int k = 0; k < count; ++k)
+    b.refl[k] = b.alive[k] != 0.0 ? ReflectanceTables::lookup(e.reflectance, b.cos_i[k]) : 0.0f;
+}
+
+FLAREKIT_VECTOR_LOOP void reflect(Block& b, int count) {
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double c = b.cos_i[k];
+    b.dx[k] += 2.0 * c * b.nx[k];
+    b.dy[k] += 2.0 * c * b.ny[k];
+    b.dz[k] += 2.0 * c * b.nz[k];
+    b.t[k] *= b.refl[k];
+  }
+}
+
+FLAREKIT_VECTOR_LOOP void refract(double eta, Block& b, int count) {
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double c = b.cos_i[k];
+    const double nx = b.nx[k], ny = b.ny[k], nz = b.nz[k];
+    // Vector form of Snell's law.
+    const double kk = 1.0 - eta * eta * (1.0 - c * c);
+    // Total internal reflection: past the critical angle (kk < 0) the ray leaves this path.
+    // r_rel carries the margin 1 − β·kk, which stays below 1 for every transmitted ray and
+    // crosses 1 exactly at the critical angle, so the rasterizer's interpolation puts the TIR
+    // edge of a ghost where it belongs instead of losing every grid cell that touches it. The
+    // ray itself goes on as the grazing refracted ray (kk = 0), continuous with its
+    // transmitted neighbours, so the cells across the edge keep a sensible shape.
+    b.rr[k] = std::max(b.rr[k], 1.0 - kValidityScale * kk);
+    const double f = eta * c - std::sqrt(std::max(kk, 0.0));
+    const double ndx = eta * b.dx[k] + f * nx;
+    const double ndy = eta * b.dy[k] + f * ny;
+    const double ndz = eta * b.dz[k] + f * nz;
+    const double inv = 1.0 / std::sqrt(ndx * ndx + ndy * ndy + ndz * ndz);
+    const bool tir = kk < 0.0;
+    b.dx[k] = tir ? ndx * inv : ndx;
+    b.dy[k] = tir ? ndy * inv : ndy;
+    b.dz[k] = tir ? ndz * inv : ndz;
+    b.t[k] *= (1.0f - b.refl[k]);
+  }
+}
+
+void applyEvent(const CompiledEvent& e, Block& b, int count) {
+  const bool flat = e.radius == 0.0;
+  if (e.kind == EventKind::kStop) {
+    if (flat)
+      intersect<true, true>(e, b, count);
+    else
+      intersect<false, true>(e, b, count);
+    return;
+  }
+  if (flat)
+    intersect<true, false>(e, b, count);
+  else
+    intersect<false, false>(e, b, count);
+  lookupReflectance(e, b, count);
+  if (e.kind == EventKind::kReflect)
+    reflect(b, count);
+  else
+    refract(e.eta, b, count);
+}
+
+// Traces rays [start, start + m) whose origins `origin(k, &x, &y)` gives, into `out` at offset.
+template <typename Origin>
+void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Origin origin,
+                 TracedRays* out, int offset) {
+  Block b;
+  for (int start = 0; start < count; start += kBlock) {
+    const int m = std::min(kBlock, count - start);
+    for (int k = 0; k < m; ++k) {
+      origin(start + k, &b.px[k], &b.py[k]);
+      b.pz[k] = 0.0;
+      b.dx[k] = dir[0];
+      b.dy[k] = dir[1];
+      b.dz[k] = dir[2];
+      b.t[k] = 1.0;
+      b.rr[k] = 0.0;
+      b.u[k] = b.v[k] = 0.0;
+      b.alive[k] = 1.0;
+      b.stop_seen[k] = 0.0;
+    }
+    for (const CompiledEvent& e : path.events) applyEvent(e, b, m);
+    for (int k = 0; k < m; ++k) {
+      const size_t o = static_cast<size_t>(offset + start + k);
+      bool ok = b.alive[k] != 0.0 && b.dz[k] > 1e-9;
+      double x = 0, y = 0;
+      if (ok) {
+        const double s = (path.z_sensor - b.pz[k]) / b.dz[k];
+        x = b.px[k] + s * b.dx[k];
+        y = b.py[k] + s * b.dy[k];
+        ok = std::isfinite(x) && std::isfinite(y) && std::abs(x) < 1e6 && std::abs(y) < 1e6;
+      }
+      // A dead ray's state is meaningless (see above): it leaves fixed values.
+      const bool traced = b.alive[k] != 0.0;
+      out->alive[o] = ok ? 1 : 0;
+      out->x_mm[o] = static_cast<float>(x);
+      out->y_mm[o] = static_cast<float>(y);
+      out->u[o] = traced ? static_cast<float>(b.u[k]) : 0.f;
+      out->v[o] = traced ? static_cast<float>(b.v[k]) : 0.f;
+      out->r_rel[o] = traced ? static_cast<float>(std::min(b.rr[k], 1e6)) : 1e6f;
+      out->transmission[o] = ok ? static_cast<float>(b.t[k]) : 0.f;
     }
   }
 }
@@ -199,42 +286,13 @@ void applyEvent(const CompiledEvent& e, Block& b, int count) {
 
 void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0, const double* y0,
                int count, TracedRays* out, int offset) {
-  Block b;
-  for (int start = 0; start < count; start += kBlock) {
-    const int m = std::min(kBlock, count - start);
-    for (int k = 0; k < m; ++k) {
-      b.px[k] = x0[start + k];
-      b.py[k] = y0[start + k];
-      b.pz[k] = 0.0;
-      b.dx[k] = dir[0];
-      b.dy[k] = dir[1];
-      b.dz[k] = dir[2];
-      b.t[k] = 1.0;
-      b.rr[k] = 0.0;
-      b.u[k] = b.v[k] = 0.0;
-      b.alive[k] = true;
-      b.stop_seen[k] = false;
-    }
-    for (const CompiledEvent& e : path.events) applyEvent(e, b, m);
-    for (int k = 0; k < m; ++k) {
-      const size_t o = static_cast<size_t>(offset + start + k);
-      bool ok = b.alive[k] && b.dz[k] > 1e-9;
-      double x = 0, y = 0;
-      if (ok) {
-        const double s = (path.z_sensor - b.pz[k]) / b.dz[k];
-        x = b.px[k] + s * b.dx[k];
-        y = b.py[k] + s * b.dy[k];
-        ok = std::isfinite(x) && std::isfinite(y) && std::abs(x) < 1e6 && std::abs(y) < 1e6;
-      }
-      out->alive[o] = ok ? 1 : 0;
-      out->x_mm[o] = static_cast<float>(x);
-      out->y_mm[o] = static_cast<float>(y);
-      out->u[o] = static_cast<float>(b.u[k]);
-      out->v[o] = static_cast<float>(b.v[k]);
-      out->r_rel[o] = static_cast<float>(std::min(b.rr[k], 1e6));
-      out->transmission[o] = ok ? static_cast<float>(b.t[k]) : 0.f;
-    }
-  }
+  traceBlocks(
+      path, dir, count,
+      [&](int k, double* x, double* y) {
+        *x = x0[k];
+        *y = y0[k];
+      },
+      out, offset);
 }
 
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
@@ -242,15 +300,18 @@ void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& gr
   const int n = grid.n;
   out->n = n;
   out->resize(n * n);
-  std::vector<double> xs(static_cast<size_t>(n)), ys(static_cast<size_t>(n));
+  // The whole grid in full blocks (a refined cell's small grid is one block, not one per row),
+  // origins made on the fly.
   const double h = grid.spacing_mm();
-  for (int i = 0; i < n; ++i) xs[static_cast<size_t>(i)] = grid.center_x_mm - grid.half_size_mm + i * h;
-  std::vector<double> y_row(static_cast<size_t>(n));
-  for (int j = 0; j < n; ++j) {
-    const double y = grid.center_y_mm - grid.half_size_mm + j * h;
-    std::fill(y_row.begin(), y_row.end(), y);
-    traceRays(path, dir, xs.data(), y_row.data(), n, out, j * n);
-  }
+  const double x_first = grid.center_x_mm - grid.half_size_mm;
+  const double y_first = grid.center_y_mm - grid.half_size_mm;
+  traceBlocks(
+      path, dir, n * n,
+      [&](int k, double* x, double* y) {
+        *x = x_first + (k % n) * h;
+        *y = y_first + (k / n) * h;
+      },
+      out, 0);
 }
 
 bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,

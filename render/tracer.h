@@ -76,7 +76,10 @@ struct TracedRays {
   std::vector<float> u, v;        // aperture coordinates at the first stop crossing
   std::vector<float> r_rel;       // max r / semi-aperture (stop crossings after the first count too)
   std::vector<float> transmission;
-  std::vector<uint8_t> alive;     // 0 = missed a sphere, TIR, or never reached the sensor
+  // 0 = never reached the sensor (parallel to a plane it had to cross, or not heading to the
+  // sensor); such a ray has x = y = 0, transmission 0 and, if it died before the sensor,
+  // u = v = 0 and r_rel = 1e6.
+  std::vector<uint8_t> alive;
   void resize(int count);
 };
 
