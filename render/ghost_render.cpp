@@ -19,31 +19,37 @@ constexpr int kRefine = 4;
 constexpr int kRefineDeeper = 4;
 constexpr int kRefineDepth = 2;
 
-// Builds the triangles of a traced grid; cells across a discontinuous edge (rays turning grazing
-// or dying) are traced again on a kRefine² sub-grid, recursively up to kRefineDepth levels, in the
-// spirit of Bodonyi & Kunkli §4.2 (denser rays only near the ghost's edges).
+// Builds the triangles of a traced grid (its rays from `first_ray` on); cells across a
+// discontinuous edge (rays turning grazing or dying) are traced again on a kRefine² sub-grid,
+// recursively up to kRefineDepth levels, in the spirit of Bodonyi & Kunkli §4.2 (denser rays only
+// near the ghost's edges). The sub-grids of one grid's cells are traced together (full blocks of
+// rays), then each cell's triangles follow in turn, in the order of a depth-first walk.
 void refineCells(const RenderSetup& setup, const CompiledPath& path, const cv::Vec3f& weight,
-                 int batch, const RayGrid& grid, const TracedRays& rays, double cell_flux,
-                 int depth, long long* traced, std::vector<RasterTriangle>* out) {
+                 int batch, const RayGrid& grid, const TracedRays& rays, size_t first_ray,
+                 double cell_flux, int depth, long long* traced, std::vector<RasterTriangle>* out) {
   std::vector<int> refine;
   buildTriangles(rays, setup.mapping, setup.aperture, cell_flux, weight, batch, out,
-                 depth < kRefineDepth ? &refine : nullptr);
+                 depth < kRefineDepth ? &refine : nullptr, first_ray);
   if (refine.empty()) return;
   const int n = grid.n;
   const double cell = grid.spacing_mm();
   const int m = depth == 0 ? kRefine : kRefineDeeper;
-  RayGrid sub;
-  sub.n = m + 1;
-  sub.half_size_mm = 0.5 * cell;
-  TracedRays sub_rays;
-  for (int q : refine) {
-    const int i = q % n, j = q / n;
+  std::vector<RayGrid> subs(refine.size());
+  for (size_t c = 0; c < refine.size(); ++c) {
+    const int i = refine[c] % n, j = refine[c] / n;
+    RayGrid& sub = subs[c];
+    sub.n = m + 1;
+    sub.half_size_mm = 0.5 * cell;
     sub.center_x_mm = grid.center_x_mm - grid.half_size_mm + (i + 0.5) * cell;
     sub.center_y_mm = grid.center_y_mm - grid.half_size_mm + (j + 0.5) * cell;
-    traceGrid(path, setup.direction, sub, &sub_rays);
-    *traced += static_cast<long long>(sub.n) * sub.n;
-    refineCells(setup, path, weight, batch, sub, sub_rays, cell_flux / (m * m), depth + 1, traced, out);
   }
+  TracedRays sub_rays;
+  traceGrids(path, setup.direction, subs, &sub_rays);
+  const size_t per_grid = static_cast<size_t>(m + 1) * static_cast<size_t>(m + 1);
+  *traced += static_cast<long long>(per_grid * subs.size());
+  for (size_t c = 0; c < subs.size(); ++c)
+    refineCells(setup, path, weight, batch, subs[c], sub_rays, c * per_grid, cell_flux / (m * m),
+                depth + 1, traced, out);
 }
 
 }  // namespace
@@ -138,7 +144,7 @@ long long traceGhostTriangles(const RenderSetup& setup, const Ghost& ghost, int 
   const double cell = grid.spacing_mm();
   const double cell_flux = cell * cell * std::abs(setup.direction[2]) * setup.light_irradiance;
   long long traced = 33LL * 33 + static_cast<long long>(n) * n;
-  refineCells(setup, path, s.rgb_weight, batch, grid, rays, cell_flux, 0, &traced, out);
+  refineCells(setup, path, s.rgb_weight, batch, grid, rays, 0, cell_flux, 0, &traced, out);
   return traced;
 }
 

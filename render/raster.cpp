@@ -298,10 +298,11 @@ float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, 
 
 void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const Aperture& aperture,
                     double cell_flux, const cv::Vec3f& weight, int batch,
-                    std::vector<RasterTriangle>* out, std::vector<int>* refine) {
+                    std::vector<RasterTriangle>* out, std::vector<int>* refine,
+                    size_t first_ray) {
   const int n = rays.n;
   auto vertex = [&](int i, int j) {
-    const size_t k = static_cast<size_t>(j * n + i);
+    const size_t k = first_ray + static_cast<size_t>(j * n + i);
     return RasterVertex{static_cast<float>(mapping.toPixelX(rays.x_mm[k])),
                         static_cast<float>(mapping.toPixelY(rays.y_mm[k])),
                         rays.u[k], rays.v[k], rays.r_rel[k], rays.transmission[k]};
@@ -312,12 +313,13 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
   // Orientation of each quad's two triangles on the sensor (+1, −1, 0 = mixed or degenerate):
   // where the pupil-to-sensor map folds (a caustic), linear interpolation across the fold is
   // wrong, so those quads and their neighbours are refined too.
-  std::vector<int8_t> orientation;
+  // (Kept per thread: refined cells call this thousands of times per frame.)
+  thread_local std::vector<int8_t> orientation;
   if (refine) {
     orientation.assign(static_cast<size_t>(n) * static_cast<size_t>(n), 0);
     for (int j = 0; j + 1 < n; ++j)
       for (int i = 0; i + 1 < n; ++i) {
-        const size_t k00 = static_cast<size_t>(j * n + i), k10 = k00 + 1;
+        const size_t k00 = first_ray + static_cast<size_t>(j * n + i), k10 = k00 + 1;
         const size_t k01 = k00 + static_cast<size_t>(n), k11 = k01 + 1;
         if (!rays.alive[k00] || !rays.alive[k10] || !rays.alive[k01] || !rays.alive[k11]) continue;
         auto cross = [&](size_t a, size_t b, size_t c) {
@@ -326,11 +328,11 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
         };
         // Only quads that show part of the ghost count: outside it rays may fold freely.
         if (!valid(k00) && !valid(k10) && !valid(k01) && !valid(k11)) {
-          orientation[k00] = 2;
+          orientation[k00 - first_ray] = 2;
           continue;
         }
         const float s1 = cross(k00, k10, k11), s2 = cross(k00, k11, k01);
-        orientation[k00] = (s1 > 0 && s2 > 0) ? 1 : (s1 < 0 && s2 < 0) ? -1 : 0;
+        orientation[k00 - first_ray] = (s1 > 0 && s2 > 0) ? 1 : (s1 < 0 && s2 < 0) ? -1 : 0;
       }
   }
   auto folded = [&](int i, int j) {
@@ -348,7 +350,7 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
   RasterTriangle t;
   for (int j = 0; j + 1 < n; ++j)
     for (int i = 0; i + 1 < n; ++i) {
-      const size_t k00 = static_cast<size_t>(j * n + i), k10 = k00 + 1;
+      const size_t k00 = first_ray + static_cast<size_t>(j * n + i), k10 = k00 + 1;
       const size_t k01 = k00 + static_cast<size_t>(n), k11 = k01 + 1;
       const size_t corner[4] = {k00, k10, k01, k11};
       bool any_valid = false, all_alive = true;

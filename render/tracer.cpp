@@ -334,6 +334,27 @@ void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& gr
       out, 0);
 }
 
+void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,
+                TracedRays* out) {
+  if (grids.empty()) {
+    out->resize(0);
+    return;
+  }
+  const int n = grids.front().n, nn = n * n;
+  out->n = n;
+  out->resize(nn * static_cast<int>(grids.size()));
+  traceBlocks(
+      path, dir, nn * static_cast<int>(grids.size()),
+      [&](int k, double* x, double* y) {
+        const RayGrid& g = grids[static_cast<size_t>(k / nn)];
+        const int l = k % nn;
+        const double h = g.spacing_mm();
+        *x = (g.center_x_mm - g.half_size_mm) + (l % n) * h;
+        *y = (g.center_y_mm - g.half_size_mm) + (l / n) * h;
+      },
+      out, 0);
+}
+
 bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,
                        double guess_y, cv::Point2d* origin) {
   return findStopRay(path, dir, 0.0, 0.0, guess_x, guess_y, origin);

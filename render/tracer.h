@@ -89,6 +89,10 @@ void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0,
 // Traces a grid (out->n = grid.n).
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
                TracedRays* out);
+// Traces grids of one size (grids[g].n = n for all g) one after another, in full blocks:
+// grid g's rays from index g·n² on (out->n = n). Each ray gets the same result as from traceGrid.
+void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,
+                TracedRays* out);
 
 // The point in the z = 0 plane from which a ray of direction `dir` passes the centre of the stop
 // on `path` (found by Newton iteration on the real trace, started from the paraxial guess).
