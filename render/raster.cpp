@@ -129,7 +129,11 @@ inline bool inside(const RasterTriangle& t, float dx, float dy) {
   return true;
 }
 
-// Planar RGB accumulation buffer covering pixels [bx, bx + stride) × [by, by + rows).
+// Interior spans are accumulated in aligned chunks of this many pixels (one AVX2 vector).
+constexpr int kChunk = 8;
+
+// Planar RGB accumulation buffer covering pixels [bx, bx + stride) × [by, by + rows); the stride
+// is a multiple of kChunk.
 struct Planes {
   float* r;
   float* g;
@@ -214,17 +218,27 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
       const float th0 = tl0 ? 0.0f : std::numeric_limits<float>::denorm_min();
       const float th1 = tl1 ? 0.0f : std::numeric_limits<float>::denorm_min();
       const float th2 = tl2 ? 0.0f : std::numeric_limits<float>::denorm_min();
+      // Whole chunks of kChunk pixels, aligned to the buffer (its stride is a multiple of
+      // kChunk): one vector operation each, no scalar remainder. Pixels of a chunk outside the
+      // span [xs, xe] add exactly +0.
+      const int c0 = p.bx + ((xs - p.bx) & ~(kChunk - 1));
+      const int chunks = (xe - c0) / kChunk + 1;
+      for (int c = 0; c < chunks; ++c) {
+        const int xb = c0 + c * kChunk;
 #pragma GCC ivdep
-      for (int i = 0; i <= xe - xs; ++i) {
-        // The same expression as everywhere else, so that every caller decides ties alike.
-        const float dx = (static_cast<float>(xs + i) + 0.5f) - t.ox;
-        const float e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
-        const float in = static_cast<float>((e0 >= th0) & (e1 >= th1) & (e2 >= th2));
-        const float tr = trow + tx * dx;
-        const float v = in * (tr > 0.0f ? tr : 0.0f);
-        R[xs + i] += wr * v;
-        G[xs + i] += wg * v;
-        B[xs + i] += wb * v;
+        for (int i = 0; i < kChunk; ++i) {
+          // The same expression as everywhere else, so that every caller decides ties alike.
+          const int x = xb + i;
+          const float dx = (static_cast<float>(x) + 0.5f) - t.ox;
+          const float e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
+          const float in = static_cast<float>((e0 >= th0) & (e1 >= th1) & (e2 >= th2) &
+                                              (x >= xs) & (x <= xe));
+          const float tr = trow + tx * dx;
+          const float v = in * (tr > 0.0f ? tr : 0.0f);
+          R[x] += wr * v;
+          G[x] += wg * v;
+          B[x] += wb * v;
+        }
       }
       continue;
     }
@@ -244,10 +258,10 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
 
 // Adds planar buffers into an interleaved CV_32FC3 image region.
 void addPlanes(const std::vector<float>& r, const std::vector<float>& g, const std::vector<float>& b,
-               int x0, int y0, int w, int h, cv::Mat* image) {
+               int stride, int x0, int y0, int w, int h, cv::Mat* image) {
   for (int y = 0; y < h; ++y) {
     auto* dst = image->ptr<cv::Vec3f>(y0 + y) + x0;
-    const size_t o = static_cast<size_t>(y) * static_cast<size_t>(w);
+    const size_t o = static_cast<size_t>(y) * static_cast<size_t>(stride);
     for (int x = 0; x < w; ++x) {
       dst[x][0] += r[o + static_cast<size_t>(x)];
       dst[x][1] += g[o + static_cast<size_t>(x)];
@@ -268,15 +282,16 @@ void rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& ape
     y1 = std::max(y1, t.y1);
   }
   const int w = x1 - x0 + 1, h = y1 - y0 + 1;
-  const size_t size = static_cast<size_t>(w) * static_cast<size_t>(h);
+  const int stride = (w + kChunk - 1) / kChunk * kChunk;
+  const size_t size = static_cast<size_t>(stride) * static_cast<size_t>(h);
   std::vector<float> r(size, 0.0f), g(size, 0.0f), b(size, 0.0f);
-  const Planes p{r.data(), g.data(), b.data(), w, x0, y0};
+  const Planes p{r.data(), g.data(), b.data(), stride, x0, y0};
   for (const RasterTriangle& t : tris) rasterizeInto(t, aperture, t.x0, t.x1, t.y0, t.y1, p);
   if (mutex) {
     std::lock_guard<std::mutex> lock(*mutex);
-    addPlanes(r, g, b, x0, y0, w, h, image);
+    addPlanes(r, g, b, stride, x0, y0, w, h, image);
   } else {
-    addPlanes(r, g, b, x0, y0, w, h, image);
+    addPlanes(r, g, b, stride, x0, y0, w, h, image);
   }
 }
 
@@ -448,7 +463,8 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       for (int fy = fy0; fy <= fy1; ++fy)
         for (int fx = fx0; fx <= fx1; ++fx) fine[static_cast<size_t>(fy * nfx + fx)].push_back(&t);
     }
-    const size_t area = static_cast<size_t>(F) * static_cast<size_t>(F);
+    const int stride = (F + kChunk - 1) / kChunk * kChunk;
+    const size_t area = static_cast<size_t>(stride) * static_cast<size_t>(F);
     std::vector<float> r(area), g(area), b(area);
     for (int j = 0; j < nfy; ++j)
       for (int i = 0; i < nfx; ++i) {
@@ -459,13 +475,13 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
         std::fill(r.begin(), r.end(), 0.0f);
         std::fill(g.begin(), g.end(), 0.0f);
         std::fill(b.begin(), b.end(), 0.0f);
-        const Planes p{r.data(), g.data(), b.data(), F, fx, fy};
+        const Planes p{r.data(), g.data(), b.data(), stride, fx, fy};
         for (const RasterTriangle* t : list)
           rasterizeInto(*t, aperture, std::max(t->x0, fx), std::min(t->x1, fx1), std::max(t->y0, fy),
                         std::min(t->y1, fy1), p);
         for (int y = fy; y <= fy1; ++y) {
           auto* dst = image->ptr<cv::Vec3f>(y);
-          const size_t o = static_cast<size_t>(y - fy) * static_cast<size_t>(F);
+          const size_t o = static_cast<size_t>(y - fy) * static_cast<size_t>(stride);
           for (int x = fx; x <= fx1; ++x) {
             const size_t q = o + static_cast<size_t>(x - fx);
             dst[x][0] += r[q];
