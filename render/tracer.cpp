@@ -97,7 +97,10 @@ struct Block {
   alignas(64) double dx[kBlock], dy[kBlock], dz[kBlock];
   alignas(64) double t[kBlock], rr[kBlock], u[kBlock], v[kBlock];
   alignas(64) double alive[kBlock], stop_seen[kBlock];
-  // Scratch of one event: oriented unit normal and cos(incidence), reflectance.
+  // Scratch of one event: ray parameter to the surface, sphere discriminant and misses (1 = the
+  // ray missed the sphere), oriented unit normal and cos(incidence), reflectance.
+  alignas(64) double s[kBlock], disc[kBlock], miss[kBlock];
+  alignas(64) double tir[kBlock];  // 1 = past the critical angle
   alignas(64) double nx[kBlock], ny[kBlock], nz[kBlock], cos_i[kBlock];
   alignas(64) float refl[kBlock];
   // Scratch of the reflectance lookup: table index, interpolation weight, the two samples.
@@ -106,25 +109,22 @@ struct Block {
   alignas(64) float r0[kBlock], r1[kBlock];
 };
 
-// Moves every live ray of the block to the event's surface: sphere (on its vertex-side
-// hemisphere, extended past the rim) or plane. Records the stop crossing, or the normal and the
-// cosine of incidence for the optical events.
-template <bool kFlat, bool kStop>
-FLAREKIT_VECTOR_LOOP void intersect(const CompiledEvent& e, Block& b, int count) {
+// The ray parameter s to the event's surface for every lane: the plane of the vertex, or the
+// sphere on its vertex-side hemisphere, extended past the rim. Returns whether a lane missed the
+// sphere (then `miss` marks them; the caller falls back to the plane there).
+template <bool kFlat>
+FLAREKIT_VECTOR_LOOP bool rayParameters(const CompiledEvent& e, Block& b, int count) {
   const double R = e.radius;
   const double cz = e.z + R;  // centre of the sphere
-  const double ez = e.z, inv_semi = e.inv_semi;
-  const double miss_base = std::abs(R) * inv_semi;
+  const double ez = e.z;
+  int any_miss = 0;
 #pragma GCC ivdep
   for (int k = 0; k < count; ++k) {
     const double px = b.px[k], py = b.py[k], pz = b.pz[k];
     const double dx = b.dx[k], dy = b.dy[k], dz = b.dz[k];
-    double rr = b.rr[k];
-    // Plane (and the fallback of a missed sphere): the ray parameter to the vertex plane.
-    double s = (ez - pz) / dz;
-    bool plane_here = kFlat;
-    bool dies = std::abs(dz) < 1e-12;
-    if constexpr (!kFlat) {
+    if constexpr (kFlat) {
+      b.s[k] = (ez - pz) / dz;
+    } else {
       // |o + s d|² = R² with o = p − C; the root on the vertex side, (z − C_z)·R < 0.
       const double ox = px, oy = py, oz = pz - cz;
       const double bb = ox * dx + oy * dy + oz * dz;
@@ -133,22 +133,55 @@ FLAREKIT_VECTOR_LOOP void intersect(const CompiledEvent& e, Block& b, int count)
       const bool miss = disc < 0.0;
       const double sq = std::sqrt(std::max(disc, 0.0));
       const double s1 = -bb - sq, s2 = -bb + sq;
-      const double s_hit = (oz + s1 * dz) * R < 0.0 ? s1 : s2;
-      // Missed the sphere: the ray passes outside every rim (r > |R| > semi-aperture), so it is
-      // not part of the ghost. Rather than dropping it (and with it every grid cell it
-      // touches), it goes on from the vertex plane with r_rel past |R|/semi-aperture, growing
-      // with the miss distance, so cells across the edge are clipped by interpolation.
-      const double rr_miss = std::max(rr, miss_base - kValidityScale * disc / (R * R));
-      s = miss ? s : s_hit;
-      rr = miss ? rr_miss : rr;
-      plane_here = miss;
-      dies = miss & dies;
+      b.s[k] = (oz + s1 * dz) * R < 0.0 ? s1 : s2;
+      b.disc[k] = disc;
+      b.miss[k] = miss ? 1.0 : 0.0;
+      any_miss |= miss;
     }
-    const double x = px + s * dx;
-    const double y = py + s * dy;
-    const double z = pz + s * dz;
-    const double r = std::sqrt(x * x + y * y);
+  }
+  return any_miss != 0;
+}
+
+// Missed the sphere: the ray passes outside every rim (r > |R| > semi-aperture), so it is not
+// part of the ghost. Rather than dropping it (and with it every grid cell it touches), it goes on
+// from the vertex plane with r_rel past |R|/semi-aperture, growing with the miss distance, so
+// cells across the edge are clipped by interpolation. (Only for blocks with a miss: it costs two
+// divisions a lane.)
+FLAREKIT_VECTOR_LOOP void missedSphere(const CompiledEvent& e, Block& b, int count) {
+  const double R = e.radius;
+  const double ez = e.z;
+  const double miss_base = std::abs(R) * e.inv_semi;
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const bool miss = b.miss[k] != 0.0;
+    const double dz = b.dz[k];
+    const double s_plane = (ez - b.pz[k]) / dz;
+    const double rr_miss = std::max(b.rr[k], miss_base - kValidityScale * b.disc[k] / (R * R));
+    const bool dies = miss & (std::abs(dz) < 1e-12);
+    b.s[k] = miss ? s_plane : b.s[k];
+    b.rr[k] = miss ? rr_miss : b.rr[k];
     b.alive[k] = dies ? 0.0 : b.alive[k];
+  }
+}
+
+// Moves every ray of the block by its parameter s to the event's surface. Records the stop
+// crossing, or the normal and the cosine of incidence for the optical events. `planes`: some
+// lanes (b.miss) met the vertex plane instead of the sphere.
+template <bool kFlat, bool kStop>
+FLAREKIT_VECTOR_LOOP void moveToSurface(const CompiledEvent& e, Block& b, int count, bool planes) {
+  const double R = e.radius;
+  const double cz = e.z + R;  // centre of the sphere
+  const double inv_semi = e.inv_semi;
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double dx = b.dx[k], dy = b.dy[k], dz = b.dz[k];
+    const double s = b.s[k];
+    const double rr = b.rr[k];
+    const double x = b.px[k] + s * dx;
+    const double y = b.py[k] + s * dy;
+    const double z = b.pz[k] + s * dz;
+    const double r = std::sqrt(x * x + y * y);
+    if constexpr (kFlat) b.alive[k] = std::abs(dz) < 1e-12 ? 0.0 : b.alive[k];
     b.px[k] = x;
     b.py[k] = y;
     b.pz[k] = z;
@@ -165,6 +198,7 @@ FLAREKIT_VECTOR_LOOP void intersect(const CompiledEvent& e, Block& b, int count)
       double nx = 0.0, ny = 0.0, nz = 1.0;
       if constexpr (!kFlat) {
         // Unit normal, pointing to −z at the vertex.
+        const bool plane_here = planes & (b.miss[k] != 0.0);
         nx = plane_here ? 0.0 : x / R;
         ny = plane_here ? 0.0 : y / R;
         nz = plane_here ? 1.0 : (z - cz) / R;
@@ -177,6 +211,18 @@ FLAREKIT_VECTOR_LOOP void intersect(const CompiledEvent& e, Block& b, int count)
       b.cos_i[k] = flip ? -c : c;
     }
   }
+}
+
+template <bool kStop>
+void intersect(const CompiledEvent& e, Block& b, int count) {
+  if (e.radius == 0.0) {
+    rayParameters<true>(e, b, count);
+    moveToSurface<true, kStop>(e, b, count, false);
+    return;
+  }
+  const bool misses = rayParameters<false>(e, b, count);
+  if (misses) missedSphere(e, b, count);
+  moveToSurface<false, kStop>(e, b, count, misses);
 }
 
 // Reflectances: ReflectanceTables::lookup written out, lane by lane the same operations, in three
@@ -213,6 +259,7 @@ FLAREKIT_VECTOR_LOOP void reflect(Block& b, int count) {
 }
 
 FLAREKIT_VECTOR_LOOP void refract(double eta, Block& b, int count) {
+  int any_tir = 0;
 #pragma GCC ivdep
   for (int k = 0; k < count; ++k) {
     const double c = b.cos_i[k];
@@ -230,28 +277,33 @@ FLAREKIT_VECTOR_LOOP void refract(double eta, Block& b, int count) {
     const double ndx = eta * b.dx[k] + f * nx;
     const double ndy = eta * b.dy[k] + f * ny;
     const double ndz = eta * b.dz[k] + f * nz;
-    const double inv = 1.0 / std::sqrt(ndx * ndx + ndy * ndy + ndz * ndz);
     const bool tir = kk < 0.0;
+    b.dx[k] = ndx;
+    b.dy[k] = ndy;
+    b.dz[k] = ndz;
+    b.tir[k] = tir ? 1.0 : 0.0;
+    any_tir |= tir;
+    b.t[k] *= (1.0f - b.refl[k]);
+  }
+  if (!any_tir) return;
+  // The grazing rays past the critical angle, normalised (only in blocks that have one).
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double ndx = b.dx[k], ndy = b.dy[k], ndz = b.dz[k];
+    const double inv = 1.0 / std::sqrt(ndx * ndx + ndy * ndy + ndz * ndz);
+    const bool tir = b.tir[k] != 0.0;
     b.dx[k] = tir ? ndx * inv : ndx;
     b.dy[k] = tir ? ndy * inv : ndy;
     b.dz[k] = tir ? ndz * inv : ndz;
-    b.t[k] *= (1.0f - b.refl[k]);
   }
 }
 
 void applyEvent(const CompiledEvent& e, Block& b, int count) {
-  const bool flat = e.radius == 0.0;
   if (e.kind == EventKind::kStop) {
-    if (flat)
-      intersect<true, true>(e, b, count);
-    else
-      intersect<false, true>(e, b, count);
+    intersect<true>(e, b, count);
     return;
   }
-  if (flat)
-    intersect<true, false>(e, b, count);
-  else
-    intersect<false, false>(e, b, count);
+  intersect<false>(e, b, count);
   lookupReflectance(e.reflectance, b, count);
   if (e.kind == EventKind::kReflect)
     reflect(b, count);
