@@ -185,6 +185,11 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
       }
     return;
   }
+  // The span's ends by multiplication: they only bound the exact test (a pixel of slack on each
+  // side), so a reciprocal's rounding cannot change which pixels are inside. (Edges too steep for
+  // a finite reciprocal keep the division.)
+  float inv_a[3];
+  for (int k = 0; k < 3; ++k) inv_a[k] = std::abs(t.ea[k]) > 1e-30f ? 1.0f / t.ea[k] : 0.0f;
   for (int y = y0; y <= y1; ++y) {
     const float dy = (y + 0.5f) - t.oy;
     float base[3];
@@ -193,10 +198,11 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
     for (int k = 0; k < 3; ++k) {
       base[k] = t.eb[k] * dy + t.ec[k];
       const float a = t.ea[k];
+      const float cross = inv_a[k] != 0.0f ? base[k] * inv_a[k] : base[k] / a;
       if (a > 0.0f)
-        lo = std::max(lo, t.ox - 0.5f - base[k] / a);
+        lo = std::max(lo, t.ox - 0.5f - cross);
       else if (a < 0.0f)
-        hi = std::min(hi, t.ox - 0.5f - base[k] / a);
+        hi = std::min(hi, t.ox - 0.5f - cross);
       else if (base[k] < 0.0f || (base[k] == 0.0f && !t.top_left[k]))
         empty = true;
     }
