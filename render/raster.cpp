@@ -469,33 +469,33 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       for (int fy = fy0; fy <= fy1; ++fy)
         for (int fx = fx0; fx <= fx1; ++fx) fine[static_cast<size_t>(fy * nfx + fx)].push_back(&t);
     }
+    // The fine tiles are tasks too (nested in the coarse tile's task), so that the two cores
+    // share the work of a crowded coarse tile (where the light's ghosts pile up) instead of one
+    // of them finishing it alone. Each writes only its own pixels.
     const int stride = (F + kChunk - 1) / kChunk * kChunk;
     const size_t area = static_cast<size_t>(stride) * static_cast<size_t>(F);
-    std::vector<float> r(area), g(area), b(area);
-    for (int j = 0; j < nfy; ++j)
-      for (int i = 0; i < nfx; ++i) {
-        const auto& list = fine[static_cast<size_t>(j * nfx + i)];
-        if (list.empty()) continue;
-        const int fx = tx0 + i * F, fy = ty0 + j * F;
-        const int fx1 = std::min(W, fx + F) - 1, fy1 = std::min(H, fy + F) - 1;
-        std::fill(r.begin(), r.end(), 0.0f);
-        std::fill(g.begin(), g.end(), 0.0f);
-        std::fill(b.begin(), b.end(), 0.0f);
-        const Planes p{r.data(), g.data(), b.data(), stride, fx, fy};
-        for (const RasterTriangle* t : list)
-          rasterizeInto(*t, aperture, std::max(t->x0, fx), std::min(t->x1, fx1), std::max(t->y0, fy),
-                        std::min(t->y1, fy1), p);
-        for (int y = fy; y <= fy1; ++y) {
-          auto* dst = image->ptr<cv::Vec3f>(y);
-          const size_t o = static_cast<size_t>(y - fy) * static_cast<size_t>(stride);
-          for (int x = fx; x <= fx1; ++x) {
-            const size_t q = o + static_cast<size_t>(x - fx);
-            dst[x][0] += r[q];
-            dst[x][1] += g[q];
-            dst[x][2] += b[q];
-          }
+    tbb::parallel_for(0, nfx * nfy, [&](int f) {
+      const int i = f % nfx, j = f / nfx;
+      const auto& list = fine[static_cast<size_t>(f)];
+      if (list.empty()) return;
+      const int fx = tx0 + i * F, fy = ty0 + j * F;
+      const int fx1 = std::min(W, fx + F) - 1, fy1 = std::min(H, fy + F) - 1;
+      std::vector<float> r(area, 0.0f), g(area, 0.0f), b(area, 0.0f);
+      const Planes p{r.data(), g.data(), b.data(), stride, fx, fy};
+      for (const RasterTriangle* t : list)
+        rasterizeInto(*t, aperture, std::max(t->x0, fx), std::min(t->x1, fx1), std::max(t->y0, fy),
+                      std::min(t->y1, fy1), p);
+      for (int y = fy; y <= fy1; ++y) {
+        auto* dst = image->ptr<cv::Vec3f>(y);
+        const size_t o = static_cast<size_t>(y - fy) * static_cast<size_t>(stride);
+        for (int x = fx; x <= fx1; ++x) {
+          const size_t q = o + static_cast<size_t>(x - fx);
+          dst[x][0] += r[q];
+          dst[x][1] += g[q];
+          dst[x][2] += b[q];
         }
       }
+    });
   });
 }
 
