@@ -106,7 +106,7 @@ std::optional<RayGrid> boundGhost(const RenderSetup& setup, const CompiledPath& 
   coarse.half_size_mm = setup.search_half_mm;
   coarse.n = kCoarse;
   TracedRays rays;
-  traceGrid(path, setup.direction, coarse, &rays);
+  traceGrid(path, setup.direction, coarse, &rays, /*passing_only=*/true);
   int i0 = kCoarse, i1 = -1, j0 = kCoarse, j1 = -1;
   for (int j = 0; j < kCoarse; ++j)
     for (int i = 0; i < kCoarse; ++i) {

@@ -311,11 +311,64 @@ void applyEvent(const CompiledEvent& e, Block& b, int count) {
     refract(e.eta, b, count);
 }
 
-// Traces rays [start, start + m) whose origins `origin(k, &x, &y)` gives, into `out` at offset.
+// Writes ray `o` of `out` as one that does not reach the image.
+void writeDead(TracedRays* out, size_t o) {
+  out->alive[o] = 0;
+  out->x_mm[o] = out->y_mm[o] = 0.f;
+  out->u[o] = out->v[o] = 0.f;
+  out->r_rel[o] = 1e6f;
+  out->transmission[o] = 0.f;
+}
+
+// Whether lane k may still pass every rim and the stop circle, judged on the values the output
+// will carry (r_rel only grows, the aperture coordinates are fixed at the first stop crossing).
+bool mayPass(const Block& b, int k) {
+  if (b.alive[k] == 0.0 || static_cast<float>(std::min(b.rr[k], 1e6)) > 1.0f) return false;
+  if (b.stop_seen[k] == 0.0) return true;
+  const float u = static_cast<float>(b.u[k]), v = static_cast<float>(b.v[k]);
+  return u * u + v * v <= 1.0f;
+}
+
+// Drops the lanes that can no longer pass (written to `out` as dead) when they are at least half
+// of the block, moving the others to the front; ray[] maps lanes to rays. Returns the lanes left.
+int dropBlocked(Block& b, int live, int* ray, TracedRays* out, int first) {
+  int passing = 0;
+  for (int k = 0; k < live; ++k) passing += mayPass(b, k);
+  if (2 * passing > live) return live;
+  int j = 0;
+  for (int k = 0; k < live; ++k) {
+    if (!mayPass(b, k)) {
+      writeDead(out, static_cast<size_t>(first + ray[k]));
+      continue;
+    }
+    if (j != k) {
+      ray[j] = ray[k];
+      b.px[j] = b.px[k];
+      b.py[j] = b.py[k];
+      b.pz[j] = b.pz[k];
+      b.dx[j] = b.dx[k];
+      b.dy[j] = b.dy[k];
+      b.dz[j] = b.dz[k];
+      b.t[j] = b.t[k];
+      b.rr[j] = b.rr[k];
+      b.u[j] = b.u[k];
+      b.v[j] = b.v[k];
+      b.alive[j] = b.alive[k];
+      b.stop_seen[j] = b.stop_seen[k];
+    }
+    ++j;
+  }
+  return j;
+}
+
+// Traces rays [0, count) whose origins `origin(k, &x, &y)` gives, into `out` from `offset` on.
+// `passing_only`: rays certain to be blocked (past a rim or outside the stop circle) are dropped
+// as soon as they are half of a block, and reported dead.
 template <typename Origin>
 void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Origin origin,
-                 TracedRays* out, int offset) {
+                 TracedRays* out, int offset, bool passing_only = false) {
   Block b;
+  int ray[kBlock];
   for (int start = 0; start < count; start += kBlock) {
     const int m = std::min(kBlock, count - start);
     for (int k = 0; k < m; ++k) {
@@ -329,10 +382,16 @@ void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Orig
       b.u[k] = b.v[k] = 0.0;
       b.alive[k] = 1.0;
       b.stop_seen[k] = 0.0;
+      ray[k] = k;
     }
-    for (const CompiledEvent& e : path.events) applyEvent(e, b, m);
-    for (int k = 0; k < m; ++k) {
-      const size_t o = static_cast<size_t>(offset + start + k);
+    int live = m;
+    for (const CompiledEvent& e : path.events) {
+      applyEvent(e, b, live);
+      if (passing_only) live = dropBlocked(b, live, ray, out, offset + start);
+      if (live == 0) break;
+    }
+    for (int k = 0; k < live; ++k) {
+      const size_t o = static_cast<size_t>(offset + start + ray[k]);
       bool ok = b.alive[k] != 0.0 && b.dz[k] > 1e-9;
       double x = 0, y = 0;
       if (ok) {
@@ -341,14 +400,16 @@ void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Orig
         y = b.py[k] + s * b.dy[k];
         ok = std::isfinite(x) && std::isfinite(y) && std::abs(x) < 1e6 && std::abs(y) < 1e6;
       }
-      // A dead ray's state is meaningless (see above): it leaves fixed values.
-      const bool traced = b.alive[k] != 0.0;
+      if (b.alive[k] == 0.0) {  // a dead ray's state is meaningless (see above)
+        writeDead(out, o);
+        continue;
+      }
       out->alive[o] = ok ? 1 : 0;
       out->x_mm[o] = static_cast<float>(x);
       out->y_mm[o] = static_cast<float>(y);
-      out->u[o] = traced ? static_cast<float>(b.u[k]) : 0.f;
-      out->v[o] = traced ? static_cast<float>(b.v[k]) : 0.f;
-      out->r_rel[o] = traced ? static_cast<float>(std::min(b.rr[k], 1e6)) : 1e6f;
+      out->u[o] = static_cast<float>(b.u[k]);
+      out->v[o] = static_cast<float>(b.v[k]);
+      out->r_rel[o] = static_cast<float>(std::min(b.rr[k], 1e6));
       out->transmission[o] = ok ? static_cast<float>(b.t[k]) : 0.f;
     }
   }
@@ -368,7 +429,7 @@ void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0,
 }
 
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
-               TracedRays* out) {
+               TracedRays* out, bool passing_only) {
   const int n = grid.n;
   out->n = n;
   out->resize(n * n);
@@ -383,7 +444,7 @@ void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& gr
         *x = x_first + (k % n) * h;
         *y = y_first + (k / n) * h;
       },
-      out, 0);
+      out, 0, passing_only);
 }
 
 void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,

@@ -86,9 +86,12 @@ struct TracedRays {
 // Traces `count` rays of direction `dir` from (x0[k], y0[k], 0).
 void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0, const double* y0,
                int count, TracedRays* out, int offset = 0);
-// Traces a grid (out->n = grid.n).
+// Traces a grid (out->n = grid.n). With `passing_only`, for callers that want only the rays that
+// pass every rim and the stop circle (r_rel ≤ 1, u² + v² ≤ 1, as floats): the others may be cut
+// short and reported dead (no work for rays certain to be blocked); those that may pass get the
+// same result as without.
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
-               TracedRays* out);
+               TracedRays* out, bool passing_only = false);
 // Traces grids of one size (grids[g].n = n for all g) one after another, in full blocks:
 // grid g's rays from index g·n² on (out->n = n). Each ray gets the same result as from traceGrid.
 void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,
