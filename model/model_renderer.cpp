@@ -199,6 +199,35 @@ inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::Bl
   e.d = e.inside ? -d : d;
 }
 
+// The signed distance at model point q by the renderer's fast path (detail::certifiedNearest):
+// Newton from `hint` (the previous pixel's nearest point) or, without one, from an angle guess,
+// certified as the global nearest point. False when it cannot certify (then `e` is unspecified
+// and the caller runs a full search). When true, e.d is exact (no cutoff).
+inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
+                                  const detail::Candidate* hint, PointEval& e) {
+  e.rx = q.x - s.mx;
+  e.lower = q.y > s.my;
+  e.ry = -std::abs(q.y - s.my);
+  detail::Candidate c = hint ? *hint : detail::angleGuess(s, e.rx, e.ry);
+  bool inside = false;
+  if (!detail::certifiedNearest(s, e.rx, e.ry, c, inside)) {
+    if (!hint) return false;
+    // The previous pixel's basin was the wrong one (the row crossed a joint or the medial axis):
+    // one more try from the angle guess.
+    c = detail::angleGuess(s, e.rx, e.ry);
+    if (!detail::certifiedNearest(s, e.rx, e.ry, c, inside)) return false;
+  }
+  e.segment = c.segment;
+  e.t = c.t;
+  e.inside = inside;
+  const detail::PowerCubic& seg = s.seg[c.segment];
+  e.bx = seg.x(c.t);
+  e.by = seg.y(c.t);
+  const double d = std::sqrt(c.d2);
+  e.d = inside ? -d : d;
+  return true;
+}
+
 // Values (and, when jac != nullptr, the Jacobian row-major [channel][parameter]) of one ghost at
 // the point whose distance `e` holds.
 inline void shadeGhost(const GhostParameters& g, const detail::PreparedShape& s, const PointEval& e,
@@ -292,6 +321,8 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
   const SignedDistanceOptions& dopt = options.distance;
   const int block = options.block_size;
 
+  const bool fast = dopt.method == NearestPointMethod::kSampledNewton;
+
   auto renderTile = [&](int tile_index) {
     const int tx = tile_index % tiles_x, ty = tile_index / tiles_x;
     const cv::Rect tile_rect(roi.x + tx * tile, roi.y + ty * tile, tile, tile);
@@ -313,25 +344,36 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
           int mode = 0;  // 0 per pixel, 1 constant inside (d ≤ −Fi), 2 nothing (d ≥ Fo)
           cv::Point2d centre(bx + 0.5 * bw, by + 0.5 * bh);
           PointEval ec;
-          detail::BlockPieces pieces;
-          pieces.certified = false;
-          const bool use_pieces = bw * bh > 1 && dopt.method == NearestPointMethod::kSampledNewton;
+          double reach = 0;
+          // The nearest point of the centre (exact when mode == 0): the first pixels' start.
+          detail::Candidate centre_nearest;
+          bool has_centre_nearest = false;
           if (bw * bh > 1) {
             const cv::Point2d qc = identity ? centre : view.modelFromImage(centre);
-            const double reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
-            evalDistance(pg.shape, qc, dopt, ec, g.inside_falloff + reach, g.outside_falloff + reach);
+            reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
+            if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec)) {
+              centre_nearest = {ec.segment, ec.t, ec.d * ec.d};
+              has_centre_nearest = true;
+            } else {
+              evalDistance(pg.shape, qc, dopt, ec, g.inside_falloff + reach, g.outside_falloff + reach);
+            }
             if (ec.d + reach <= -g.inside_falloff) mode = 1;
             else if (ec.d - reach >= g.outside_falloff) mode = 2;
-            // Below the cutoffs the centre's distance is exact: every pixel of the block is within
-            // |d| + reach of the outline, which bounds the pieces that can be nearest.
-            if (mode == 0 && use_pieces)
-              pieces = detail::collectBlockPieces(pg.shape, ec.rx, ec.ry, reach, std::abs(ec.d) + reach);
           }
           if (mode == 2) continue;
+          // Below the cutoffs the centre's distance is exact: every pixel of the block is within
+          // |d| + reach of the outline, which bounds the pieces that can be nearest. Collected
+          // only when a pixel needs the full search.
+          detail::BlockPieces pieces;
+          pieces.certified = false;
+          bool pieces_ready = !(mode == 0 && bw * bh > 1 && fast);
+          detail::Candidate row_start = centre_nearest;  // the previous row's first pixel
+          bool has_row_start = has_centre_nearest;
           for (int y = by; y < by + bh; ++y) {
             float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
-            detail::Candidate hint;
-            bool has_hint = false;
+            detail::Candidate hint = row_start;  // the previous pixel's nearest point (coherence)
+            bool has_hint = has_row_start;
+            bool first_in_row = true;
             double last_d = 0;  // the last exact distance in this row, at x = last_x
             int last_x = 0;
             bool has_last = false;
@@ -361,14 +403,32 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               }
               const cv::Point2d q = identity ? p : view.modelFromImage(p);
               PointEval e;
-              if (pieces.certified) {
-                evalDistanceInBlock(pg.shape, pieces, q, dopt.newton_steps, hint, has_hint, e);
+              bool exact = false;  // e.d is the exact distance (no cutoff)
+              if (fast && evalDistanceCertified(pg.shape, q, has_hint ? &hint : nullptr, e)) {
+                exact = true;
+              } else if (fast && bw * bh > 1 && mode == 0) {
+                if (!pieces_ready) {
+                  pieces = detail::collectBlockPieces(pg.shape, ec.rx, ec.ry, reach, std::abs(ec.d) + reach);
+                  pieces_ready = true;
+                }
+                if (pieces.certified) {
+                  evalDistanceInBlock(pg.shape, pieces, q, dopt.newton_steps, hint, has_hint, e);
+                  exact = true;  // the block search has no cutoff
+                }
+              }
+              if (!exact && !pieces.certified) evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
+              if (exact) {
+                hint = {e.segment, e.t, e.d * e.d};
                 has_hint = true;
-                last_d = e.d;  // exact: the block search has no cutoff
+                if (first_in_row) {
+                  row_start = hint;
+                  has_row_start = true;
+                  first_in_row = false;
+                }
+                last_d = e.d;
                 last_x = x;
                 has_last = true;
-              } else
-                evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
+              }
               shadeGhost(g, pg.shape, e, values, deriv ? jac.data() : nullptr);
               for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(values[c]);
               if (deriv) {
