@@ -201,21 +201,29 @@ inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::Bl
 
 // The signed distance at model point q by the renderer's fast path (detail::certifiedNearest):
 // Newton from `hint` (the previous pixel's nearest point) or, without one, from an angle guess,
-// certified as the global nearest point. False when it cannot certify (then `e` is unspecified
-// and the caller runs a full search). When true, e.d is exact (no cutoff).
+// certified as the global nearest point. False when it cannot certify (then the caller runs a
+// full search, and `bound`, when Newton converged, is an outline point near p to start it from).
+// When true, e.d is exact (no cutoff).
 inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
-                                  const detail::Candidate* hint, PointEval& e) {
+                                  const detail::Candidate* hint, PointEval& e,
+                                  detail::Candidate& bound, bool& has_bound) {
   e.rx = q.x - s.mx;
   e.lower = q.y > s.my;
   e.ry = -std::abs(q.y - s.my);
+  has_bound = false;
   detail::Candidate c = hint ? *hint : detail::angleGuess(s, e.rx, e.ry);
   bool inside = false;
-  if (!detail::certifiedNearest(s, e.rx, e.ry, c, inside)) {
-    if (!hint) return false;
-    // The previous pixel's basin was the wrong one (the row crossed a joint or the medial axis):
+  detail::Certificate result = detail::certifiedNearest(s, e.rx, e.ry, c, inside);
+  if (result == detail::Certificate::kNotConverged && hint) {
+    // The previous pixel's basin was a poor start (the row crossed a joint or the medial axis):
     // one more try from the angle guess.
     c = detail::angleGuess(s, e.rx, e.ry);
-    if (!detail::certifiedNearest(s, e.rx, e.ry, c, inside)) return false;
+    result = detail::certifiedNearest(s, e.rx, e.ry, c, inside);
+  }
+  if (result != detail::Certificate::kCertified) {
+    bound = c;
+    has_bound = result == detail::Certificate::kUnproven;
+    return false;
   }
   e.segment = c.segment;
   e.t = c.t;
@@ -232,10 +240,15 @@ inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
 // the point whose distance `e` holds.
 inline void shadeGhost(const GhostParameters& g, const detail::PreparedShape& s, const PointEval& e,
                        double* values, double* jac) {
-  const TransferWeights w = transferWeights(e.d, g, jac != nullptr);
   const int channels = g.channels;
+  if (!jac) {
+    double border = 0, inside = 0;
+    transferValueWeights(e.d, g, border, inside);
+    for (int c = 0; c < channels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
+    return;
+  }
+  const TransferWeights w = transferWeights(e.d, g, true);
   for (int c = 0; c < channels; ++c) values[c] = w.border * g.border[c] + w.inside * g.inside[c];
-  if (!jac) return;
   const ParameterLayout layout{channels};
   const int n = layout.count();
   std::fill(jac, jac + channels * n, 0.0);
@@ -351,7 +364,9 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
           if (bw * bh > 1) {
             const cv::Point2d qc = identity ? centre : view.modelFromImage(centre);
             reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
-            if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec)) {
+            detail::Candidate unused;
+            bool has_unused = false;
+            if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec, unused, has_unused)) {
               centre_nearest = {ec.segment, ec.t, ec.d * ec.d};
               has_centre_nearest = true;
             } else {
@@ -373,6 +388,8 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
             detail::Candidate hint = row_start;  // the previous pixel's nearest point (coherence)
             bool has_hint = has_row_start;
+            detail::Candidate before_hint;  // the nearest point of the pixel before that
+            bool has_before_hint = false;
             bool first_in_row = true;
             double last_d = 0;  // the last exact distance in this row, at x = last_x
             int last_x = 0;
@@ -404,7 +421,14 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               const cv::Point2d q = identity ? p : view.modelFromImage(p);
               PointEval e;
               bool exact = false;  // e.d is the exact distance (no cutoff)
-              if (fast && evalDistanceCertified(pg.shape, q, has_hint ? &hint : nullptr, e)) {
+              // Newton starts where the last two nearest points of the row point to (t moves
+              // smoothly along a row): one Newton step fewer than from the last point alone.
+              detail::Candidate start = hint;
+              if (has_before_hint && before_hint.segment == hint.segment)
+                start.t = std::clamp(2 * hint.t - before_hint.t, 0.0, 1.0);
+              detail::Candidate bound;
+              bool has_bound = false;
+              if (fast && evalDistanceCertified(pg.shape, q, has_hint ? &start : nullptr, e, bound, has_bound)) {
                 exact = true;
               } else if (fast && bw * bh > 1 && mode == 0) {
                 if (!pieces_ready) {
@@ -412,12 +436,18 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                   pieces_ready = true;
                 }
                 if (pieces.certified) {
+                  if (has_bound) {
+                    hint = bound;
+                    has_hint = true;
+                  }
                   evalDistanceInBlock(pg.shape, pieces, q, dopt.newton_steps, hint, has_hint, e);
                   exact = true;  // the block search has no cutoff
                 }
               }
               if (!exact && !pieces.certified) evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
               if (exact) {
+                before_hint = hint;
+                has_before_hint = has_hint;
                 hint = {e.segment, e.t, e.d * e.d};
                 has_hint = true;
                 if (first_in_row) {

@@ -76,6 +76,7 @@ inline double curvatureRadius(const PowerCubic& c, double a, double b) {
 struct PreparedShape {
   double mx = 0, my = 0;    // M
   double left = 0, right = 0, height = 0;
+  double size2 = 0;  // (L + R + h)²: the scale of B′², pixels²
   std::array<PowerCubic, 2> seg{};
   std::array<int, 2> samples{};  // samples per segment
   std::array<std::array<double, kMaxSamples>, 2> sample_t{}, sample_x{}, sample_y{};
@@ -103,6 +104,7 @@ struct PreparedShape {
     left = g.left;
     right = g.right;
     height = g.height;
+    size2 = (left + right + height) * (left + right + height);
     const auto outline = ghostOutline(g);
     const cv::Point2d m(mx, my);
     seg[0] = toPowerForm(outline[0], m);
@@ -452,9 +454,16 @@ inline bool insideRelative(const PreparedShape& s, double x, double y) {
 // The sign follows from the same bounds (p outside the supporting half-plane, or inside the
 // disc), except within 1e-7 px of the outline, where the exact inside test decides. On success
 // `c` holds the nearest point (segment 0 or 1, t, d²) and `inside` the sign; both agree with the
-// full search (nearestUpperNewton + insideRelative) to Newton's precision (~1e-10 px).
-inline bool certifiedNearest(const PreparedShape& s, double px, double py, Candidate& c,
-                             bool& inside) {
+// full search (nearestUpperNewton + insideRelative) to Newton's precision (~1e-10 px). Deep inside
+// (beyond the rolling disc) the converged point is returned as kUnproven: a tight upper bound
+// that lets the full search dismiss most of the outline by its boxes.
+enum class Certificate {
+  kCertified,    // c is the nearest point, `inside` the sign
+  kUnproven,     // Newton converged to c (a good upper bound), but it may not be the nearest point
+  kNotConverged  // c is unchanged
+};
+inline Certificate certifiedNearest(const PreparedShape& s, double px, double py, Candidate& c,
+                                    bool& inside) {
   int w = c.segment;
   double t = std::clamp(c.t, 0.0, 1.0);
   int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
@@ -466,7 +475,8 @@ inline bool certifiedNearest(const PreparedShape& s, double px, double py, Candi
     const double f = bx * dx + by * dy;
     const double speed2 = dx * dx + dy * dy;
     const double fp = speed2 + bx * seg.ddx(t) + by * seg.ddy(t);
-    if (!(fp > 0)) return false;  // not in a basin of a minimum (or B′ = 0 at a corner)
+    // Not in the basin of a minimum, or B′ ≈ 0 (a corner of a Cl = 0 or Cr = 0 outline).
+    if (!(fp > 0) || !(speed2 > 1e-12 * s.size2)) return Certificate::kNotConverged;
     double next = t - f / fp;
     if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
       w = 0;
@@ -489,36 +499,42 @@ inline bool certifiedNearest(const PreparedShape& s, double px, double py, Candi
     }
     const double moved = next - t;
     t = next;
-    // As in refineNearest: a step below 1e-5 px leaves an error of the order of its square.
-    if (moved * moved * speed2 < 1e-10) {
+    // Newton converges quadratically here: after a step of δ pixels the foot is off by about
+    // δ²/ρ, and the distance, stationary in t, by the square of that. Below 1e-3 px: done (the
+    // certificate below bounds the actual error anyway).
+    if (moved * moved * speed2 < 1e-6) {
       converged = true;
       break;
     }
   }
-  if (!converged) return false;
+  if (!converged) return Certificate::kNotConverged;
   const PowerCubic& seg = s.seg[w];
   const double vx = px - seg.x(t), vy = py - seg.y(t);
   const double d2 = vx * vx + vy * vy;
   const double d = std::sqrt(d2);
+  const double tx = seg.dx(t), ty = seg.dy(t);
   c = {w, t, d2};
   if (d < 1e-7) {  // on the outline: any sign is within 1e-7 px, take the exact one
     inside = insideRelative(s, px, py);
-    return true;
+    return Certificate::kCertified;
   }
-  const cv::Point2d tangent = tangentDirection(seg, t);
-  // Outward normal: the tangent turned by −90° (the outline runs clockwise as displayed, y down).
-  const double nx = tangent.y, ny = -tangent.x;
+  // Outward unit normal: the tangent turned by −90° (the outline runs clockwise as displayed, y
+  // down).
+  const double speed2 = tx * tx + ty * ty;
+  if (!(speed2 > 1e-12 * s.size2)) return Certificate::kUnproven;
+  const double inv_speed = 1 / std::sqrt(speed2);
+  const double nx = ty * inv_speed, ny = -tx * inv_speed;
   const double vn = vx * nx + vy * ny;
   if (vn > 0) {
     inside = false;
-    return d - vn <= kDistanceTolerance;
+    return d - vn <= kDistanceTolerance ? Certificate::kCertified : Certificate::kUnproven;
   }
   const double rho = s.min_curvature_radius;
-  if (!(rho > d)) return false;
+  if (!(rho > d)) return Certificate::kUnproven;
   const double cx = vx + rho * nx, cy = vy + rho * ny;  // p − (B − ρ n)
   const double lower = rho - std::sqrt(cx * cx + cy * cy);
   inside = true;
-  return d - lower <= kDistanceTolerance;
+  return d - lower <= kDistanceTolerance ? Certificate::kCertified : Certificate::kUnproven;
 }
 
 // A starting point for certifiedNearest without a previous pixel: the outline point at the same
