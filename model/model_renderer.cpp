@@ -336,7 +336,17 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
 
   const bool fast = dopt.method == NearestPointMethod::kSampledNewton;
 
+  // The nearest points (t, segment, x) of the last three exact pixels of a row: t moves smoothly
+  // along a row, so extrapolating them starts Newton within about 1e-3 px of the answer, and one
+  // step is then enough.
+  struct RowHistory {
+    double t[3] = {0, 0, 0};
+    int segment[3] = {-1, -1, -1};
+    int x[3] = {0, 0, 0};
+  };
+
   auto renderTile = [&](int tile_index) {
+    std::vector<RowHistory> histories;
     const int tx = tile_index % tiles_x, ty = tile_index / tiles_x;
     const cv::Rect tile_rect(roi.x + tx * tile, roi.y + ty * tile, tile, tile);
     double values[3];
@@ -348,7 +358,12 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
       if (region.area() <= 0) continue;
       GhostDerivativeImages* deriv = derivatives ? &(*derivatives)[ghost_index[k]] : nullptr;
       const int n = pg.count;
+      const float inside_value[3] = {static_cast<float>(g.inside[0]), static_cast<float>(g.inside[1]),
+                                     static_cast<float>(g.inside[2])};
       for (int by = region.y; by < region.y + region.height; by += block) {
+        // The nearest points of the last three exact pixels of each row of this band of blocks:
+        // kept across the blocks of the band, so a row continues into the next block.
+        histories.assign(static_cast<size_t>(block), RowHistory{});
         for (int bx = region.x; bx < region.x + region.width; bx += block) {
           const int bw = std::min(block, region.x + region.width - bx);
           const int bh = std::min(block, region.y + region.height - by);
@@ -376,6 +391,28 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             else if (ec.d - reach >= g.outside_falloff) mode = 2;
           }
           if (mode == 2) continue;
+          if (mode == 1) {  // the whole block is deeper than Fi: the constant Ii (vectorizable)
+            const ParameterLayout layout{channels};
+            for (int y = by; y < by + bh; ++y) {
+              float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
+              for (int i = 0; i < bw; ++i)
+                for (int c = 0; c < channels; ++c) out[i * channels + c] += inside_value[c];
+              if (deriv)
+                for (int c = 0; c < channels; ++c) {
+                  float* d = deriv->images[layout.ii(c)].ptr<float>(y - deriv->rect.y) +
+                             static_cast<size_t>(bx - deriv->rect.x) * channels + c;
+                  for (int i = 0; i < bw; ++i) d[i * channels] = 1.0f;
+                }
+            }
+            continue;
+          }
+          // Per-pixel classification without a square root: a pixel at image distance r from the
+          // centre is deeper than Fi when r ≤ (−Fi − d_c)·scale, farther than Fo when
+          // r ≤ (d_c − Fo)·scale.
+          const double deep_radius = (-g.inside_falloff - ec.d) * view.scale;
+          const double far_radius = (ec.d - g.outside_falloff) * view.scale;
+          const double deep_radius2 = deep_radius >= 0 ? deep_radius * deep_radius : -1;
+          const double far_radius2 = far_radius >= 0 ? far_radius * far_radius : -1;
           // Below the cutoffs the centre's distance is exact: every pixel of the block is within
           // |d| + reach of the outline, which bounds the pieces that can be nearest. Collected
           // only when a pixel needs the full search.
@@ -388,8 +425,14 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
             detail::Candidate hint = row_start;  // the previous pixel's nearest point (coherence)
             bool has_hint = has_row_start;
-            detail::Candidate before_hint;  // the nearest point of the pixel before that
-            bool has_before_hint = false;
+            RowHistory& history = histories[static_cast<size_t>(y - by)];
+            double* history_t = history.t;
+            int* history_segment = history.segment;
+            int* history_x = history.x;
+            if (history_segment[0] >= 0 && history_x[0] == bx - 1) {  // the row's left neighbour
+              hint = {history_segment[0], history_t[0], 0};
+              has_hint = true;
+            }
             bool first_in_row = true;
             double last_d = 0;  // the last exact distance in this row, at x = last_x
             int last_x = 0;
@@ -400,9 +443,9 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               if (mode == 0 && bw * bh > 1) {
                 // The same bounds per pixel, with its own distance from the centre, and from the
                 // last pixel of the row whose distance is known exactly (d is 1-Lipschitz).
-                const double r = std::sqrt((p.x - centre.x) * (p.x - centre.x) + (p.y - centre.y) * (p.y - centre.y)) * inv_scale;
-                if (ec.d + r <= -g.inside_falloff) pixel_mode = 1;
-                else if (ec.d - r >= g.outside_falloff) continue;
+                const double r2 = (p.x - centre.x) * (p.x - centre.x) + (p.y - centre.y) * (p.y - centre.y);
+                if (r2 <= deep_radius2) pixel_mode = 1;
+                else if (r2 <= far_radius2) continue;
                 if (has_last && pixel_mode == 0) {
                   const double step = (x - last_x) * inv_scale;
                   if (last_d + step <= -g.inside_falloff) pixel_mode = 1;
@@ -410,7 +453,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 }
               }
               if (pixel_mode == 1) {
-                for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(g.inside[c]);
+                for (int c = 0; c < channels; ++c) out[c] += inside_value[c];
                 if (deriv) {
                   const ParameterLayout layout{channels};
                   for (int c = 0; c < channels; ++c)
@@ -421,11 +464,16 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               const cv::Point2d q = identity ? p : view.modelFromImage(p);
               PointEval e;
               bool exact = false;  // e.d is the exact distance (no cutoff)
-              // Newton starts where the last two nearest points of the row point to (t moves
-              // smoothly along a row): one Newton step fewer than from the last point alone.
               detail::Candidate start = hint;
-              if (has_before_hint && before_hint.segment == hint.segment)
-                start.t = std::clamp(2 * hint.t - before_hint.t, 0.0, 1.0);
+              if (history_segment[0] == hint.segment && history_x[0] == x - 1) {
+                const bool same1 = history_segment[1] == hint.segment && history_x[1] == x - 2;
+                const bool same2 = same1 && history_segment[2] == hint.segment && history_x[2] == x - 3;
+                if (same2)  // quadratic extrapolation
+                  start.t = 3 * history_t[0] - 3 * history_t[1] + history_t[2];
+                else if (same1)  // linear
+                  start.t = 2 * history_t[0] - history_t[1];
+                start.t = std::clamp(start.t, 0.0, 1.0);
+              }
               detail::Candidate bound;
               bool has_bound = false;
               if (fast && evalDistanceCertified(pg.shape, q, has_hint ? &start : nullptr, e, bound, has_bound)) {
@@ -446,8 +494,14 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               }
               if (!exact && !pieces.certified) evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
               if (exact) {
-                before_hint = hint;
-                has_before_hint = has_hint;
+                for (int h = 2; h > 0; --h) {
+                  history_t[h] = history_t[h - 1];
+                  history_segment[h] = history_segment[h - 1];
+                  history_x[h] = history_x[h - 1];
+                }
+                history_t[0] = e.t;
+                history_segment[0] = e.segment;
+                history_x[0] = x;
                 hint = {e.segment, e.t, e.d * e.d};
                 has_hint = true;
                 if (first_in_row) {
