@@ -578,13 +578,19 @@ RenderedGhosts renderGhostsWithDerivatives(std::span<const GhostParameters> ghos
   RenderedGhosts r;
   r.image = cv::Mat(roi.size(), CV_MAKETYPE(CV_32F, channels), cv::Scalar::all(0));
   r.derivatives.resize(ghosts.size());
-  for (size_t i = 0; i < ghosts.size(); ++i) {
+  // parameterCount images per ghost, zeroed: tens of megabytes for a frame of ghosts, so allocated
+  // and cleared in parallel too.
+  auto allocate = [&](size_t i) {
     GhostDerivativeImages& d = r.derivatives[i];
     d.rect = ghostPixelBounds(ghosts[i], view) & roi;
     if (d.rect.area() <= 0) d.rect = cv::Rect(roi.x, roi.y, 0, 0);
     d.images.resize(parameterCount(channels));
     for (auto& m : d.images) m = cv::Mat(d.rect.size(), CV_MAKETYPE(CV_32F, channels), cv::Scalar::all(0));
-  }
+  };
+  if (options.parallel && ghosts.size() > 1)
+    tbb::parallel_for(size_t{0}, ghosts.size(), allocate);
+  else
+    for (size_t i = 0; i < ghosts.size(); ++i) allocate(i);
   renderInto(ghosts, roi, r.image, &r.derivatives, options, view);
   return r;
 }
