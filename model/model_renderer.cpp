@@ -513,7 +513,13 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 last_x = x;
                 has_last = true;
               }
-              shadeGhost(g, pg.shape, e, values, deriv ? jac.data() : nullptr);
+              if (deriv) {
+                shadeGhost(g, pg.shape, e, values, jac.data());
+              } else {  // the value alone, inline (what shadeGhost computes without a Jacobian)
+                double border = 0, inside = 0;
+                transferValueWeights(e.d, g, border, inside);
+                for (int c = 0; c < channels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
+              }
               for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(values[c]);
               if (deriv) {
                 const size_t offset = static_cast<size_t>(x - deriv->rect.x) * channels;
