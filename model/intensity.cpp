@@ -17,11 +17,11 @@ TransferWeights transferWeights(double d, const GhostParameters& g, bool with_de
   const double a = std::abs(d);
   const bool saturated = a >= falloff;
   const double tau = saturated ? 1.0 : a / falloff;
-  const double log_tau = tau > 0 ? std::log(tau) : 0.0;
-  const double power = saturated ? 1.0 : (tau > 0 ? std::exp(exponent * log_tau) : 0.0);  // τ^E
+  const double power = transferPower(tau, exponent);  // τ^E
   w.border = 1 - power;
   w.inside = inside ? power : 0.0;
   if (!with_derivatives || saturated) return w;
+  const double log_tau = tau > 0 ? std::log(tau) : 0.0;
   // ∂τ^E/∂τ = E·τ^(E−1), finite at τ = 0 by evaluating at max(τ, 1e-9) (the outline is a
   // non-smooth point of the model anyway).
   const double dpower_dtau =

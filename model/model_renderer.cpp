@@ -199,14 +199,56 @@ inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::Bl
   e.d = e.inside ? -d : d;
 }
 
+// The signed distance at model point q by the renderer's fast path (detail::certifiedNearest):
+// Newton from `hint` (the previous pixel's nearest point) or, without one, from an angle guess,
+// certified as the global nearest point. False when it cannot certify (then the caller runs a
+// full search, and `bound`, when Newton converged, is an outline point near p to start it from).
+// When true, e.d is exact (no cutoff).
+inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
+                                  const detail::Candidate* hint, PointEval& e,
+                                  detail::Candidate& bound, bool& has_bound) {
+  e.rx = q.x - s.mx;
+  e.lower = q.y > s.my;
+  e.ry = -std::abs(q.y - s.my);
+  has_bound = false;
+  detail::Candidate c = hint ? *hint : detail::angleGuess(s, e.rx, e.ry);
+  bool inside = false;
+  detail::Certificate result = detail::certifiedNearest(s, e.rx, e.ry, c, inside);
+  if (result == detail::Certificate::kNotConverged && hint) {
+    // The previous pixel's basin was a poor start (the row crossed a joint or the medial axis):
+    // one more try from the angle guess.
+    c = detail::angleGuess(s, e.rx, e.ry);
+    result = detail::certifiedNearest(s, e.rx, e.ry, c, inside);
+  }
+  if (result != detail::Certificate::kCertified) {
+    bound = c;
+    has_bound = result == detail::Certificate::kUnproven;
+    return false;
+  }
+  e.segment = c.segment;
+  e.t = c.t;
+  e.inside = inside;
+  const detail::PowerCubic& seg = s.seg[c.segment];
+  e.bx = seg.x(c.t);
+  e.by = seg.y(c.t);
+  const double d = std::sqrt(c.d2);
+  e.d = inside ? -d : d;
+  return true;
+}
+
 // Values (and, when jac != nullptr, the Jacobian row-major [channel][parameter]) of one ghost at
 // the point whose distance `e` holds.
 inline void shadeGhost(const GhostParameters& g, const detail::PreparedShape& s, const PointEval& e,
                        double* values, double* jac) {
-  const TransferWeights w = transferWeights(e.d, g, jac != nullptr);
   const int channels = g.channels;
+  if (!jac) {
+    double border = 0, inside = 0;
+    transferValueWeights(e.d, g, border, inside);
+    for (int c = 0; c < channels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
+    return;
+  }
+  const TransferWeights w = transferWeights(e.d, g, true);
   for (int c = 0; c < channels; ++c) values[c] = w.border * g.border[c] + w.inside * g.inside[c];
-  if (!jac) return;
   const ParameterLayout layout{channels};
   const int n = layout.count();
   std::fill(jac, jac + channels * n, 0.0);
@@ -292,7 +334,19 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
   const SignedDistanceOptions& dopt = options.distance;
   const int block = options.block_size;
 
+  const bool fast = dopt.method == NearestPointMethod::kSampledNewton;
+
+  // The nearest points (t, segment, x) of the last three exact pixels of a row: t moves smoothly
+  // along a row, so extrapolating them starts Newton within about 1e-3 px of the answer, and one
+  // step is then enough.
+  struct RowHistory {
+    double t[3] = {0, 0, 0};
+    int segment[3] = {-1, -1, -1};
+    int x[3] = {0, 0, 0};
+  };
+
   auto renderTile = [&](int tile_index) {
+    std::vector<RowHistory> histories;
     const int tx = tile_index % tiles_x, ty = tile_index / tiles_x;
     const cv::Rect tile_rect(roi.x + tx * tile, roi.y + ty * tile, tile, tile);
     double values[3];
@@ -304,7 +358,12 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
       if (region.area() <= 0) continue;
       GhostDerivativeImages* deriv = derivatives ? &(*derivatives)[ghost_index[k]] : nullptr;
       const int n = pg.count;
+      const float inside_value[3] = {static_cast<float>(g.inside[0]), static_cast<float>(g.inside[1]),
+                                     static_cast<float>(g.inside[2])};
       for (int by = region.y; by < region.y + region.height; by += block) {
+        // The nearest points of the last three exact pixels of each row of this band of blocks:
+        // kept across the blocks of the band, so a row continues into the next block.
+        histories.assign(static_cast<size_t>(block), RowHistory{});
         for (int bx = region.x; bx < region.x + region.width; bx += block) {
           const int bw = std::min(block, region.x + region.width - bx);
           const int bh = std::min(block, region.y + region.height - by);
@@ -313,25 +372,68 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
           int mode = 0;  // 0 per pixel, 1 constant inside (d ≤ −Fi), 2 nothing (d ≥ Fo)
           cv::Point2d centre(bx + 0.5 * bw, by + 0.5 * bh);
           PointEval ec;
-          detail::BlockPieces pieces;
-          pieces.certified = false;
-          const bool use_pieces = bw * bh > 1 && dopt.method == NearestPointMethod::kSampledNewton;
+          double reach = 0;
+          // The nearest point of the centre (exact when mode == 0): the first pixels' start.
+          detail::Candidate centre_nearest;
+          bool has_centre_nearest = false;
           if (bw * bh > 1) {
             const cv::Point2d qc = identity ? centre : view.modelFromImage(centre);
-            const double reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
-            evalDistance(pg.shape, qc, dopt, ec, g.inside_falloff + reach, g.outside_falloff + reach);
+            reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
+            detail::Candidate unused;
+            bool has_unused = false;
+            if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec, unused, has_unused)) {
+              centre_nearest = {ec.segment, ec.t, ec.d * ec.d};
+              has_centre_nearest = true;
+            } else {
+              evalDistance(pg.shape, qc, dopt, ec, g.inside_falloff + reach, g.outside_falloff + reach);
+            }
             if (ec.d + reach <= -g.inside_falloff) mode = 1;
             else if (ec.d - reach >= g.outside_falloff) mode = 2;
-            // Below the cutoffs the centre's distance is exact: every pixel of the block is within
-            // |d| + reach of the outline, which bounds the pieces that can be nearest.
-            if (mode == 0 && use_pieces)
-              pieces = detail::collectBlockPieces(pg.shape, ec.rx, ec.ry, reach, std::abs(ec.d) + reach);
           }
           if (mode == 2) continue;
+          if (mode == 1) {  // the whole block is deeper than Fi: the constant Ii (vectorizable)
+            const ParameterLayout layout{channels};
+            for (int y = by; y < by + bh; ++y) {
+              float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
+              for (int i = 0; i < bw; ++i)
+                for (int c = 0; c < channels; ++c) out[i * channels + c] += inside_value[c];
+              if (deriv)
+                for (int c = 0; c < channels; ++c) {
+                  float* d = deriv->images[layout.ii(c)].ptr<float>(y - deriv->rect.y) +
+                             static_cast<size_t>(bx - deriv->rect.x) * channels + c;
+                  for (int i = 0; i < bw; ++i) d[i * channels] = 1.0f;
+                }
+            }
+            continue;
+          }
+          // Per-pixel classification without a square root: a pixel at image distance r from the
+          // centre is deeper than Fi when r ≤ (−Fi − d_c)·scale, farther than Fo when
+          // r ≤ (d_c − Fo)·scale.
+          const double deep_radius = (-g.inside_falloff - ec.d) * view.scale;
+          const double far_radius = (ec.d - g.outside_falloff) * view.scale;
+          const double deep_radius2 = deep_radius >= 0 ? deep_radius * deep_radius : -1;
+          const double far_radius2 = far_radius >= 0 ? far_radius * far_radius : -1;
+          // Below the cutoffs the centre's distance is exact: every pixel of the block is within
+          // |d| + reach of the outline, which bounds the pieces that can be nearest. Collected
+          // only when a pixel needs the full search.
+          detail::BlockPieces pieces;
+          pieces.certified = false;
+          bool pieces_ready = !(mode == 0 && bw * bh > 1 && fast);
+          detail::Candidate row_start = centre_nearest;  // the previous row's first pixel
+          bool has_row_start = has_centre_nearest;
           for (int y = by; y < by + bh; ++y) {
             float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
-            detail::Candidate hint;
-            bool has_hint = false;
+            detail::Candidate hint = row_start;  // the previous pixel's nearest point (coherence)
+            bool has_hint = has_row_start;
+            RowHistory& history = histories[static_cast<size_t>(y - by)];
+            double* history_t = history.t;
+            int* history_segment = history.segment;
+            int* history_x = history.x;
+            if (history_segment[0] >= 0 && history_x[0] == bx - 1) {  // the row's left neighbour
+              hint = {history_segment[0], history_t[0], 0};
+              has_hint = true;
+            }
+            bool first_in_row = true;
             double last_d = 0;  // the last exact distance in this row, at x = last_x
             int last_x = 0;
             bool has_last = false;
@@ -341,9 +443,9 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               if (mode == 0 && bw * bh > 1) {
                 // The same bounds per pixel, with its own distance from the centre, and from the
                 // last pixel of the row whose distance is known exactly (d is 1-Lipschitz).
-                const double r = std::sqrt((p.x - centre.x) * (p.x - centre.x) + (p.y - centre.y) * (p.y - centre.y)) * inv_scale;
-                if (ec.d + r <= -g.inside_falloff) pixel_mode = 1;
-                else if (ec.d - r >= g.outside_falloff) continue;
+                const double r2 = (p.x - centre.x) * (p.x - centre.x) + (p.y - centre.y) * (p.y - centre.y);
+                if (r2 <= deep_radius2) pixel_mode = 1;
+                else if (r2 <= far_radius2) continue;
                 if (has_last && pixel_mode == 0) {
                   const double step = (x - last_x) * inv_scale;
                   if (last_d + step <= -g.inside_falloff) pixel_mode = 1;
@@ -351,7 +453,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 }
               }
               if (pixel_mode == 1) {
-                for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(g.inside[c]);
+                for (int c = 0; c < channels; ++c) out[c] += inside_value[c];
                 if (deriv) {
                   const ParameterLayout layout{channels};
                   for (int c = 0; c < channels; ++c)
@@ -361,15 +463,63 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               }
               const cv::Point2d q = identity ? p : view.modelFromImage(p);
               PointEval e;
-              if (pieces.certified) {
-                evalDistanceInBlock(pg.shape, pieces, q, dopt.newton_steps, hint, has_hint, e);
+              bool exact = false;  // e.d is the exact distance (no cutoff)
+              detail::Candidate start = hint;
+              if (history_segment[0] == hint.segment && history_x[0] == x - 1) {
+                const bool same1 = history_segment[1] == hint.segment && history_x[1] == x - 2;
+                const bool same2 = same1 && history_segment[2] == hint.segment && history_x[2] == x - 3;
+                if (same2)  // quadratic extrapolation
+                  start.t = 3 * history_t[0] - 3 * history_t[1] + history_t[2];
+                else if (same1)  // linear
+                  start.t = 2 * history_t[0] - history_t[1];
+                start.t = std::clamp(start.t, 0.0, 1.0);
+              }
+              detail::Candidate bound;
+              bool has_bound = false;
+              if (fast && evalDistanceCertified(pg.shape, q, has_hint ? &start : nullptr, e, bound, has_bound)) {
+                exact = true;
+              } else if (fast && bw * bh > 1 && mode == 0) {
+                if (!pieces_ready) {
+                  pieces = detail::collectBlockPieces(pg.shape, ec.rx, ec.ry, reach, std::abs(ec.d) + reach);
+                  pieces_ready = true;
+                }
+                if (pieces.certified) {
+                  if (has_bound) {
+                    hint = bound;
+                    has_hint = true;
+                  }
+                  evalDistanceInBlock(pg.shape, pieces, q, dopt.newton_steps, hint, has_hint, e);
+                  exact = true;  // the block search has no cutoff
+                }
+              }
+              if (!exact && !pieces.certified) evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
+              if (exact) {
+                for (int h = 2; h > 0; --h) {
+                  history_t[h] = history_t[h - 1];
+                  history_segment[h] = history_segment[h - 1];
+                  history_x[h] = history_x[h - 1];
+                }
+                history_t[0] = e.t;
+                history_segment[0] = e.segment;
+                history_x[0] = x;
+                hint = {e.segment, e.t, e.d * e.d};
                 has_hint = true;
-                last_d = e.d;  // exact: the block search has no cutoff
+                if (first_in_row) {
+                  row_start = hint;
+                  has_row_start = true;
+                  first_in_row = false;
+                }
+                last_d = e.d;
                 last_x = x;
                 has_last = true;
-              } else
-                evalDistance(pg.shape, q, dopt, e, g.inside_falloff, g.outside_falloff);
-              shadeGhost(g, pg.shape, e, values, deriv ? jac.data() : nullptr);
+              }
+              if (deriv) {
+                shadeGhost(g, pg.shape, e, values, jac.data());
+              } else {  // the value alone, inline (what shadeGhost computes without a Jacobian)
+                double border = 0, inside = 0;
+                transferValueWeights(e.d, g, border, inside);
+                for (int c = 0; c < channels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
+              }
               for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(values[c]);
               if (deriv) {
                 const size_t offset = static_cast<size_t>(x - deriv->rect.x) * channels;
@@ -434,13 +584,19 @@ RenderedGhosts renderGhostsWithDerivatives(std::span<const GhostParameters> ghos
   RenderedGhosts r;
   r.image = cv::Mat(roi.size(), CV_MAKETYPE(CV_32F, channels), cv::Scalar::all(0));
   r.derivatives.resize(ghosts.size());
-  for (size_t i = 0; i < ghosts.size(); ++i) {
+  // parameterCount images per ghost, zeroed: tens of megabytes for a frame of ghosts, so allocated
+  // and cleared in parallel too.
+  auto allocate = [&](size_t i) {
     GhostDerivativeImages& d = r.derivatives[i];
     d.rect = ghostPixelBounds(ghosts[i], view) & roi;
     if (d.rect.area() <= 0) d.rect = cv::Rect(roi.x, roi.y, 0, 0);
     d.images.resize(parameterCount(channels));
     for (auto& m : d.images) m = cv::Mat(d.rect.size(), CV_MAKETYPE(CV_32F, channels), cv::Scalar::all(0));
-  }
+  };
+  if (options.parallel && ghosts.size() > 1)
+    tbb::parallel_for(size_t{0}, ghosts.size(), allocate);
+  else
+    for (size_t i = 0; i < ghosts.size(); ++i) allocate(i);
   renderInto(ghosts, roi, r.image, &r.derivatives, options, view);
   return r;
 }

@@ -6,6 +6,7 @@
 #include <random>
 #include <sstream>
 
+#include "model/detail/outline_search.h"
 
 namespace flarekit::model {
 namespace {
@@ -187,6 +188,92 @@ TEST(SignedDistance, MatchesDenseReferenceOverTheWholeParameterRange) {
   std::ostringstream figures;
   figures << std::scientific << worst << " (paper 12-step bisection: " << paper_worst << ")";
   RecordProperty("worst_error_px", figures.str());
+}
+
+TEST(SignedDistance, RendererFastPathMatchesDenseReferenceWheneverItCertifies) {
+  // The renderer's fast path (detail::certifiedNearest: Newton from a start, then a supporting-line
+  // or rolling-disc certificate) must meet the same 0.01 px bound with the sign right, on the same
+  // kind of shapes and points as MatchesDenseReferenceOverTheWholeParameterRange, from good starts
+  // (the angle guess, the exact answer of a neighbour) and from arbitrary ones. It may decline
+  // (the renderer then runs the full search), but not too often, or it would be no fast path.
+  std::mt19937 rng(20261122);
+  std::uniform_real_distribution<double> unit(0, 1);
+  const SignedDistanceOptions options;
+  double worst = 0;
+  int band_points = 0, certified_from_guess = 0, certified = 0;
+  for (int shape = 0; shape < 200; ++shape) {
+    const GhostParameters g = randomShape(rng);
+    const DenseReference ref(g);
+    const detail::PreparedShape prepared(g, options.samples_per_segment, options.max_sample_turn_deg);
+    const auto outline = ghostOutline(g);
+    const cv::Rect2d box = outlineBounds(g);
+    int kept = 0;
+    for (int attempt = 0; attempt < 2000 && kept < 60; ++attempt) {
+      cv::Point2d p;
+      if (attempt % 2 == 0) {
+        const int s = static_cast<int>(unit(rng) * 4) % 4;
+        const double t = unit(rng);
+        const cv::Point2d tangent = outline[s].derivative(t);
+        const double len = std::hypot(tangent.x, tangent.y);
+        const cv::Point2d normal = len > 0 ? cv::Point2d(tangent.y, -tangent.x) / len : cv::Point2d(0, 0);
+        const double offset = -g.inside_falloff + unit(rng) * (g.inside_falloff + g.outside_falloff);
+        p = outline[s].at(t) + offset * normal;
+      } else {
+        const double fo = g.outside_falloff;
+        p = cv::Point2d(box.x - fo + unit(rng) * (box.width + 2 * fo),
+                        box.y - fo + unit(rng) * (box.height + 2 * fo));
+      }
+      const double reference = ref.unsignedDistance(p);
+      const double reference_sign = ref.sign(p);
+      const double signed_reference = reference_sign * reference;
+      const bool in_band = signed_reference >= -g.inside_falloff && signed_reference <= g.outside_falloff;
+      if (in_band) {
+        ++kept;
+        ++band_points;
+      }
+      // The reflected point relative to M, as the renderer passes it.
+      const double rx = p.x - g.center_x, ry = -std::abs(p.y - g.center_y);
+      // The exact answer of a pixel next to p (a row neighbour's hint).
+      const NearestPoint neighbour = nearestPoint(g, p + cv::Point2d(1, 0), options);
+      const int neighbour_segment = neighbour.segment >= 2 ? 3 - neighbour.segment : neighbour.segment;
+      const double neighbour_t = neighbour.segment >= 2 ? 1 - neighbour.t : neighbour.t;
+      const detail::Candidate starts[3] = {detail::angleGuess(prepared, rx, ry),
+                                           {neighbour_segment, neighbour_t, 0},
+                                           {unit(rng) < 0.5 ? 0 : 1, unit(rng), 0}};
+      for (int k = 0; k < 3; ++k) {
+        detail::Candidate c = starts[k];
+        bool inside = false;
+        if (detail::certifiedNearest(prepared, rx, ry, c, inside) != detail::Certificate::kCertified)
+          continue;
+        ++certified;
+        if (k == 0 && in_band) ++certified_from_guess;
+        const double distance = std::sqrt(c.d2);
+        if (reference > 1e-6 * (1 + std::max(box.width, box.height) * 1e-3)) {
+          ASSERT_EQ(inside ? -1 : 1, reference_sign)
+              << "shape " << shape << " start " << k << " p " << p << " d " << distance << " L " << g.left
+              << " R " << g.right << " h " << g.height << " Cl " << g.curvature_left << " Cr "
+              << g.curvature_right;
+        }
+        // Certified anywhere means exact anywhere (the certificate has no cutoff).
+        const double error = std::abs(distance - reference);
+        if (in_band) worst = std::max(worst, error);
+        ASSERT_LE(error, 0.01) << "shape " << shape << " start " << k << " p " << p << " d " << distance
+                               << " ref " << reference << " L " << g.left << " R " << g.right << " h "
+                               << g.height << " Cl " << g.curvature_left << " Cr " << g.curvature_right;
+        // The returned point is on the outline at the returned t.
+        const detail::PowerCubic& seg = prepared.seg[c.segment];
+        EXPECT_NEAR(std::hypot(rx - seg.x(c.t), ry - seg.y(c.t)), distance, 1e-9 * (1 + distance));
+      }
+    }
+  }
+  EXPECT_GT(band_points, 3000);
+  // Shapes over the whole range include corners (Cl or Cr = 0) and very thin ones, where the fast
+  // path declines deep inside; most band points still certify from the angle guess alone.
+  EXPECT_GT(certified_from_guess, band_points * 2 / 5);
+  std::ostringstream figures;
+  figures << std::scientific << worst << " (" << certified << " certified results, "
+          << certified_from_guess << " of " << band_points << " band points from the angle guess)";
+  RecordProperty("fast_path_worst_error_px", figures.str());
 }
 
 TEST(SignedDistance, InsideTestIsExactOnTheAxesAndCorners) {

@@ -45,10 +45,19 @@ Aperture::Aperture(const ApertureShape& shape) : shape_(shape) {
     cv::max(mask_, 0.0, mask_);
     cv::min(mask_, 1.0, mask_);
   }
+  if (shape.kind != ApertureKind::kMask) {
+    const float inner = apothem_ * (1.0f - 1e-4f);
+    inner_radius2_ = inner * inner;
+  }
 }
 
 float Aperture::transmission(float u, float v) const {
-  if (shape_.kind != ApertureKind::kMask) return signedDistance(u, v) >= 0.0f ? 1.0f : 0.0f;
+  if (shape_.kind != ApertureKind::kMask) {
+    // Well inside the inscribed circle (radius = apothem ≤ 1; the margin dwarfs float rounding)
+    // every distance function is positive: no need to evaluate the blades.
+    if (u * u + v * v < inner_radius2_) return 1.0f;
+    return signedDistance(u, v) >= 0.0f ? 1.0f : 0.0f;
+  }
   // Bilinear lookup; the mask covers [−1, 1]², pixel centres at (i + 0.5).
   const float fx = (u + 1.0f) * 0.5f * mask_.cols - 0.5f;
   const float fy = (v + 1.0f) * 0.5f * mask_.rows - 0.5f;

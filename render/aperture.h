@@ -70,6 +70,7 @@ class Aperture {
   int edges_ = 0;
   float apothem_ = 1.0f;    // distance of the edges from the centre
   float rounding_ = 0.0f;
+  float inner_radius2_ = 0.0f;  // (apothem·(1 − 1e-4))²: points within are surely inside
 };
 
 }  // namespace flarekit::render

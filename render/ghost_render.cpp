@@ -19,31 +19,37 @@ constexpr int kRefine = 4;
 constexpr int kRefineDeeper = 4;
 constexpr int kRefineDepth = 2;
 
-// Builds the triangles of a traced grid; cells across a discontinuous edge (rays turning grazing
-// or dying) are traced again on a kRefine² sub-grid, recursively up to kRefineDepth levels, in the
-// spirit of Bodonyi & Kunkli §4.2 (denser rays only near the ghost's edges).
+// Builds the triangles of a traced grid (its rays from `first_ray` on); cells across a
+// discontinuous edge (rays turning grazing or dying) are traced again on a kRefine² sub-grid,
+// recursively up to kRefineDepth levels, in the spirit of Bodonyi & Kunkli §4.2 (denser rays only
+// near the ghost's edges). The sub-grids of one grid's cells are traced together (full blocks of
+// rays), then each cell's triangles follow in turn, in the order of a depth-first walk.
 void refineCells(const RenderSetup& setup, const CompiledPath& path, const cv::Vec3f& weight,
-                 int batch, const RayGrid& grid, const TracedRays& rays, double cell_flux,
-                 int depth, long long* traced, std::vector<RasterTriangle>* out) {
+                 int batch, const RayGrid& grid, const TracedRays& rays, size_t first_ray,
+                 double cell_flux, int depth, long long* traced, std::vector<RasterTriangle>* out) {
   std::vector<int> refine;
   buildTriangles(rays, setup.mapping, setup.aperture, cell_flux, weight, batch, out,
-                 depth < kRefineDepth ? &refine : nullptr);
+                 depth < kRefineDepth ? &refine : nullptr, first_ray);
   if (refine.empty()) return;
   const int n = grid.n;
   const double cell = grid.spacing_mm();
   const int m = depth == 0 ? kRefine : kRefineDeeper;
-  RayGrid sub;
-  sub.n = m + 1;
-  sub.half_size_mm = 0.5 * cell;
-  TracedRays sub_rays;
-  for (int q : refine) {
-    const int i = q % n, j = q / n;
+  std::vector<RayGrid> subs(refine.size());
+  for (size_t c = 0; c < refine.size(); ++c) {
+    const int i = refine[c] % n, j = refine[c] / n;
+    RayGrid& sub = subs[c];
+    sub.n = m + 1;
+    sub.half_size_mm = 0.5 * cell;
     sub.center_x_mm = grid.center_x_mm - grid.half_size_mm + (i + 0.5) * cell;
     sub.center_y_mm = grid.center_y_mm - grid.half_size_mm + (j + 0.5) * cell;
-    traceGrid(path, setup.direction, sub, &sub_rays);
-    *traced += static_cast<long long>(sub.n) * sub.n;
-    refineCells(setup, path, weight, batch, sub, sub_rays, cell_flux / (m * m), depth + 1, traced, out);
   }
+  TracedRays sub_rays;
+  traceGrids(path, setup.direction, subs, &sub_rays);
+  const size_t per_grid = static_cast<size_t>(m + 1) * static_cast<size_t>(m + 1);
+  *traced += static_cast<long long>(per_grid * subs.size());
+  for (size_t c = 0; c < subs.size(); ++c)
+    refineCells(setup, path, weight, batch, subs[c], sub_rays, c * per_grid, cell_flux / (m * m),
+                depth + 1, traced, out);
 }
 
 }  // namespace
@@ -100,7 +106,7 @@ std::optional<RayGrid> boundGhost(const RenderSetup& setup, const CompiledPath& 
   coarse.half_size_mm = setup.search_half_mm;
   coarse.n = kCoarse;
   TracedRays rays;
-  traceGrid(path, setup.direction, coarse, &rays);
+  traceGrid(path, setup.direction, coarse, &rays, /*passing_only=*/true);
   int i0 = kCoarse, i1 = -1, j0 = kCoarse, j1 = -1;
   for (int j = 0; j < kCoarse; ++j)
     for (int i = 0; i < kCoarse; ++i) {
@@ -138,7 +144,7 @@ long long traceGhostTriangles(const RenderSetup& setup, const Ghost& ghost, int 
   const double cell = grid.spacing_mm();
   const double cell_flux = cell * cell * std::abs(setup.direction[2]) * setup.light_irradiance;
   long long traced = 33LL * 33 + static_cast<long long>(n) * n;
-  refineCells(setup, path, s.rgb_weight, batch, grid, rays, cell_flux, 0, &traced, out);
+  refineCells(setup, path, s.rgb_weight, batch, grid, rays, 0, cell_flux, 0, &traced, out);
   return traced;
 }
 
@@ -272,15 +278,19 @@ std::vector<Sprite> ghostSprites(const RenderSetup& setup, const Ghost& ghost) {
 }
 
 // Adds the sprites' pixels on row y. Inside the iris's inscribed circle (less half a pixel) the
-// sprite is flat: a constant is added over that span; only the rim band evaluates the aperture.
-void addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* image) {
+// sprite is flat: its constant goes into `step` (RGB and a span count: 4 doubles a pixel,
+// cols + 1 pixels) as a step up
+// at the span's start and down past its end, for the caller to integrate once for all sprites
+// (many sprites cover the whole frame, which would otherwise cost a pass over it each); only the
+// rim band evaluates the aperture. Returns whether it added a step.
+bool addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* image, double* step) {
   const double r = std::abs(sp.m);
   const double dy = y + 0.5 - sp.cy;
-  if (std::abs(dy) > r + 1.0) return;
+  if (std::abs(dy) > r + 1.0) return false;
   const double half = std::sqrt(std::max(0.0, (r + 1.0) * (r + 1.0) - dy * dy));
   const int x0 = std::max(0, static_cast<int>(std::floor(sp.cx - half)));
   const int x1 = std::min(image->cols - 1, static_cast<int>(std::ceil(sp.cx + half)));
-  if (x0 > x1) return;
+  if (x0 > x1) return false;
   // Inner flat span: radius (apothem − half a pixel) in aperture units, for polygons and circles.
   double inner = -1.0;
   if (aperture.hasDistance()) {
@@ -293,6 +303,34 @@ void addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* im
     i0 = std::max(x0, static_cast<int>(std::ceil(sp.cx - inner - 0.5)));
     i1 = std::min(x1, static_cast<int>(std::floor(sp.cx + inner - 0.5)));
   }
+  // A straight-bladed polygon is flat over more than its inscribed circle (a hexagon's corners
+  // reach 15 % further): the row's chord of the polygon shrunk by half a pixel, each blade's
+  // half-plane solved for u, less a pixel on each side for rounding, where the coverage is 1.
+  if (aperture.shape().kind == ApertureKind::kPolygon && aperture.rounding() == 0.0f) {
+    const double v = dy / sp.m;
+    const double limit = aperture.apothem() - 0.5 / r;
+    double u_lo = -1e30, u_hi = 1e30;
+    for (int k = 0; k < aperture.edgeCount(); ++k) {
+      const double nx = aperture.edgeNormalX(k), ny = aperture.edgeNormalY(k);
+      const double bound = limit - v * ny;  // u·nx ≤ bound
+      if (nx > 1e-9)
+        u_hi = std::min(u_hi, bound / nx);
+      else if (nx < -1e-9)
+        u_lo = std::max(u_lo, bound / nx);
+      else if (bound < 0.0)
+        u_hi = -1e30;
+    }
+    if (u_lo < u_hi) {
+      // x + 0.5 = cx + u·m; m < 0 mirrors the interval.
+      const double xa = sp.cx + u_lo * sp.m - 0.5, xb = sp.cx + u_hi * sp.m - 0.5;
+      const int p0 = std::max(x0, static_cast<int>(std::ceil(std::min(xa, xb))) + 1);
+      const int p1 = std::min(x1, static_cast<int>(std::floor(std::max(xa, xb))) - 1);
+      if (p0 <= p1 && (i0 > i1 || p1 - p0 > i1 - i0)) {
+        i0 = p0;
+        i1 = p1;
+      }
+    }
+  }
   auto* row = image->ptr<cv::Vec3f>(y);
   const cv::Vec3f flat = sp.weight * sp.value;
   const float footprint = static_cast<float>(1.0 / r);
@@ -304,11 +342,17 @@ void addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* im
   };
   if (i0 > i1) {
     for (int x = x0; x <= x1; ++x) edge(x);
-    return;
+    return false;
   }
   for (int x = x0; x < i0; ++x) edge(x);
-  for (int x = i0; x <= i1; ++x) row[x] += flat;
+  for (int c = 0; c < 3; ++c) {
+    step[4 * i0 + c] += flat[c];
+    step[4 * (i1 + 1) + c] -= flat[c];
+  }
+  step[4 * i0 + 3] += 1.0;  // spans open
+  step[4 * (i1 + 1) + 3] -= 1.0;
   for (int x = i1 + 1; x <= x1; ++x) edge(x);
+  return true;
 }
 
 }  // namespace
@@ -321,10 +365,29 @@ void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts
   std::vector<Sprite> sprites;
   for (const Ghost& g : ghosts)
     for (const Sprite& s : ghostSprites(setup, g)) sprites.push_back(s);
-  // Rows in parallel: each row sums every sprite that crosses it.
+  // Rows in parallel: each row sums every sprite that crosses it, the flat spans integrated from
+  // their steps in one pass, in double; where no span is open the sum restarts from exactly 0, so
+  // rounding leaves nothing behind a bright span.
+  const int cols = image->cols;
   tbb::parallel_for(tbb::blocked_range<int>(0, image->rows, 8), [&](const tbb::blocked_range<int>& rows) {
-    for (int y = rows.begin(); y < rows.end(); ++y)
-      for (const Sprite& s : sprites) addSpriteRow(s, setup.aperture, y, image);
+    std::vector<double> step(4 * (static_cast<size_t>(cols) + 1));
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      std::fill(step.begin(), step.end(), 0.0);
+      bool flat = false;
+      for (const Sprite& s : sprites) flat |= addSpriteRow(s, setup.aperture, y, image, step.data());
+      if (!flat) continue;
+      float* row = image->ptr<float>(y);
+      double sum[4] = {0.0, 0.0, 0.0, 0.0};
+      for (int x = 0; x < cols; ++x) {
+        const double* st = &step[4 * static_cast<size_t>(x)];
+        for (int c = 0; c < 4; ++c) sum[c] += st[c];
+        if (sum[3] < 0.5) {  // no span open (the count is an exact small integer)
+          sum[0] = sum[1] = sum[2] = 0.0;
+          continue;
+        }
+        for (int c = 0; c < 3; ++c) row[3 * x + c] += static_cast<float>(sum[c]);
+      }
+    }
   });
 }
 

@@ -63,9 +63,12 @@ struct SensorMapping {
 // for the caller to trace more finely.
 inline constexpr float kRefineJump = 0.3f;
 // Triangles entirely outside a rim or a straight iris edge are dropped.
+// The grid's rays start at index `first_ray` of `rays` (several grids traced together, see
+// traceGrids); rays.n is its side.
 void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const Aperture& aperture,
                     double cell_flux, const cv::Vec3f& weight, int batch,
-                    std::vector<RasterTriangle>* out, std::vector<int>* refine = nullptr);
+                    std::vector<RasterTriangle>* out, std::vector<int>* refine = nullptr,
+                    size_t first_ray = 0);
 
 // Value (before the colour weight) of a triangle at pixel centre (x, y), 0 outside it.
 float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, float y);

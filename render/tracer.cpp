@@ -76,135 +76,303 @@ void TracedRays::resize(int count) {
 namespace {
 
 // Rays are traced in blocks, each event applied to the whole block in one loop over rays (struct
-// of arrays, branch-light so that the compiler can vectorise the arithmetic).
+// of arrays). The loops are branch-free so that the compiler vectorises them: every lane computes
+// both sides of each case and selects (the same IEEE operations as a scalar case analysis, so a
+// ray's result does not depend on its block), and every lane goes on computing after its ray
+// died (alive = 0): the state of dead rays is meaningless and never read. The one gather, the
+// reflectance lookup, has its own scalar loop between the vector loops.
 constexpr int kBlock = 64;
 
 // Slope β of the validity margins folded into r_rel (total internal reflection, missed spheres).
 constexpr double kValidityScale = 4.0;
 
+// The vector loops are also built for AVX2 (4 doubles a vector instead of SSE2's 2), chosen at
+// load time by the CPU. Without FMA the AVX2 code performs the same IEEE operations, so images do
+// not depend on the machine.
+#define FLAREKIT_VECTOR_LOOP __attribute__((target_clones("avx2", "default")))
+
+// Lane flags are doubles (1 = set) so that the masks have the width of the data they select.
 struct Block {
-  double px[kBlock], py[kBlock], pz[kBlock];
-  double dx[kBlock], dy[kBlock], dz[kBlock];
-  double t[kBlock], rr[kBlock], u[kBlock], v[kBlock];
-  bool alive[kBlock], stop_seen[kBlock];
+  alignas(64) double px[kBlock], py[kBlock], pz[kBlock];
+  alignas(64) double dx[kBlock], dy[kBlock], dz[kBlock];
+  alignas(64) double t[kBlock], rr[kBlock], u[kBlock], v[kBlock];
+  alignas(64) double alive[kBlock], stop_seen[kBlock];
+  // Scratch of one event: ray parameter to the surface, sphere discriminant and misses (1 = the
+  // ray missed the sphere), oriented unit normal and cos(incidence), reflectance.
+  alignas(64) double s[kBlock], disc[kBlock], miss[kBlock];
+  alignas(64) double tir[kBlock];  // 1 = past the critical angle
+  alignas(64) double nx[kBlock], ny[kBlock], nz[kBlock], cos_i[kBlock];
+  alignas(64) float refl[kBlock];
+  // Scratch of the reflectance lookup: table index, interpolation weight, the two samples.
+  alignas(64) double weight[kBlock];
+  alignas(64) int index[kBlock];
+  alignas(64) float r0[kBlock], r1[kBlock];
 };
 
-void applyEvent(const CompiledEvent& e, Block& b, int count) {
-  const bool flat = e.radius == 0.0;
+// The ray parameter s to the event's surface for every lane: the plane of the vertex, or the
+// sphere on its vertex-side hemisphere, extended past the rim. Returns whether a lane missed the
+// sphere (then `miss` marks them; the caller falls back to the plane there).
+template <bool kFlat>
+FLAREKIT_VECTOR_LOOP bool rayParameters(const CompiledEvent& e, Block& b, int count) {
   const double R = e.radius;
   const double cz = e.z + R;  // centre of the sphere
+  const double ez = e.z;
+  int any_miss = 0;
+#pragma GCC ivdep
   for (int k = 0; k < count; ++k) {
-    if (!b.alive[k]) continue;
-    double s;
-    double nx = 0.0, ny = 0.0, nz = 1.0;
-    bool flat_here = flat;
-    if (flat) {
-      if (std::abs(b.dz[k]) < 1e-12) {
-        b.alive[k] = false;
-        continue;
-      }
-      s = (e.z - b.pz[k]) / b.dz[k];
+    const double px = b.px[k], py = b.py[k], pz = b.pz[k];
+    const double dx = b.dx[k], dy = b.dy[k], dz = b.dz[k];
+    if constexpr (kFlat) {
+      b.s[k] = (ez - pz) / dz;
     } else {
       // |o + s d|² = R² with o = p − C; the root on the vertex side, (z − C_z)·R < 0.
-      const double ox = b.px[k], oy = b.py[k], oz = b.pz[k] - cz;
-      const double bb = ox * b.dx[k] + oy * b.dy[k] + oz * b.dz[k];
+      const double ox = px, oy = py, oz = pz - cz;
+      const double bb = ox * dx + oy * dy + oz * dz;
       const double cc = ox * ox + oy * oy + oz * oz - R * R;
       const double disc = bb * bb - cc;
-      if (disc < 0.0) {
-        // Missed the sphere: the ray passes outside every rim (r > |R| > semi-aperture), so it is
-        // not part of the ghost. Rather than dropping it (and with it every grid cell it
-        // touches), it goes on from the vertex plane with r_rel past |R|/semi-aperture, growing
-        // with the miss distance, so cells across the edge are clipped by interpolation.
-        if (std::abs(b.dz[k]) < 1e-12) {
-          b.alive[k] = false;
-          continue;
-        }
-        s = (e.z - b.pz[k]) / b.dz[k];
-        flat_here = true;
-        b.rr[k] = std::max(b.rr[k], std::abs(R) * e.inv_semi - kValidityScale * disc / (R * R));
-      } else {
-        const double sq = std::sqrt(disc);
-        const double s1 = -bb - sq;
-        s = ((oz + s1 * b.dz[k]) * R < 0.0) ? s1 : -bb + sq;
-      }
+      const bool miss = disc < 0.0;
+      const double sq = std::sqrt(std::max(disc, 0.0));
+      const double s1 = -bb - sq, s2 = -bb + sq;
+      b.s[k] = (oz + s1 * dz) * R < 0.0 ? s1 : s2;
+      b.disc[k] = disc;
+      b.miss[k] = miss ? 1.0 : 0.0;
+      any_miss |= miss;
     }
-    const double x = b.px[k] + s * b.dx[k];
-    const double y = b.py[k] + s * b.dy[k];
-    const double z = b.pz[k] + s * b.dz[k];
+  }
+  return any_miss != 0;
+}
+
+// Missed the sphere: the ray passes outside every rim (r > |R| > semi-aperture), so it is not
+// part of the ghost. Rather than dropping it (and with it every grid cell it touches), it goes on
+// from the vertex plane with r_rel past |R|/semi-aperture, growing with the miss distance, so
+// cells across the edge are clipped by interpolation. (Only for blocks with a miss: it costs two
+// divisions a lane.)
+FLAREKIT_VECTOR_LOOP void missedSphere(const CompiledEvent& e, Block& b, int count) {
+  const double R = e.radius;
+  const double ez = e.z;
+  const double miss_base = std::abs(R) * e.inv_semi;
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const bool miss = b.miss[k] != 0.0;
+    const double dz = b.dz[k];
+    const double s_plane = (ez - b.pz[k]) / dz;
+    const double rr_miss = std::max(b.rr[k], miss_base - kValidityScale * b.disc[k] / (R * R));
+    const bool dies = miss & (std::abs(dz) < 1e-12);
+    b.s[k] = miss ? s_plane : b.s[k];
+    b.rr[k] = miss ? rr_miss : b.rr[k];
+    b.alive[k] = dies ? 0.0 : b.alive[k];
+  }
+}
+
+// Moves every ray of the block by its parameter s to the event's surface. Records the stop
+// crossing, or the normal and the cosine of incidence for the optical events. `planes`: some
+// lanes (b.miss) met the vertex plane instead of the sphere.
+template <bool kFlat, bool kStop>
+FLAREKIT_VECTOR_LOOP void moveToSurface(const CompiledEvent& e, Block& b, int count, bool planes) {
+  const double R = e.radius;
+  const double cz = e.z + R;  // centre of the sphere
+  const double inv_semi = e.inv_semi;
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double dx = b.dx[k], dy = b.dy[k], dz = b.dz[k];
+    const double s = b.s[k];
+    const double rr = b.rr[k];
+    const double x = b.px[k] + s * dx;
+    const double y = b.py[k] + s * dy;
+    const double z = b.pz[k] + s * dz;
+    const double r = std::sqrt(x * x + y * y);
+    if constexpr (kFlat) b.alive[k] = std::abs(dz) < 1e-12 ? 0.0 : b.alive[k];
     b.px[k] = x;
     b.py[k] = y;
     b.pz[k] = z;
-    const double r = std::sqrt(x * x + y * y);
-    if (e.kind == EventKind::kStop) {
-      if (!b.stop_seen[k]) {
-        b.u[k] = x * e.inv_semi;
-        b.v[k] = y * e.inv_semi;
-        b.stop_seen[k] = true;
-      } else {
-        // Later crossings of a ghost that passes the stop three times: the iris (as a circle)
-        // clips through r_rel (the aperture shape applies at the first crossing only).
-        b.rr[k] = std::max(b.rr[k], r * e.inv_semi);
-      }
-      continue;
-    }
-    b.rr[k] = std::max(b.rr[k], r * e.inv_semi);
-    if (!flat_here) {
-      nx = x / R;
-      ny = y / R;
-      nz = (z - cz) / R;  // unit normal, pointing to −z at the vertex
-    }
-    double cos_i = -(nx * b.dx[k] + ny * b.dy[k] + nz * b.dz[k]);
-    if (cos_i < 0.0) {  // orient the normal against the ray
-      nx = -nx;
-      ny = -ny;
-      nz = -nz;
-      cos_i = -cos_i;
-    }
-    const float refl = ReflectanceTables::lookup(e.reflectance, cos_i);
-    if (e.kind == EventKind::kReflect) {
-      b.dx[k] += 2.0 * cos_i * nx;
-      b.dy[k] += 2.0 * cos_i * ny;
-      b.dz[k] += 2.0 * cos_i * nz;
-      b.t[k] *= refl;
+    if constexpr (kStop) {
+      // Later crossings of a ghost that passes the stop three times: the iris (as a circle)
+      // clips through r_rel (the aperture shape applies at the first crossing only).
+      const bool first = b.stop_seen[k] == 0.0;
+      b.u[k] = first ? x * inv_semi : b.u[k];
+      b.v[k] = first ? y * inv_semi : b.v[k];
+      b.stop_seen[k] = 1.0;
+      b.rr[k] = first ? rr : std::max(rr, r * inv_semi);
     } else {
-      // Vector form of Snell's law.
-      const double eta = e.eta;
-      const double kk = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-      // Total internal reflection: past the critical angle (kk < 0) the ray leaves this path.
-      // r_rel carries the margin 1 − β·kk, which stays below 1 for every transmitted ray and
-      // crosses 1 exactly at the critical angle, so the rasterizer's interpolation puts the TIR
-      // edge of a ghost where it belongs instead of losing every grid cell that touches it. The
-      // ray itself goes on as the grazing refracted ray (kk = 0), continuous with its
-      // transmitted neighbours, so the cells across the edge keep a sensible shape.
-      b.rr[k] = std::max(b.rr[k], 1.0 - kValidityScale * kk);
-      const double f = eta * cos_i - std::sqrt(std::max(kk, 0.0));
-      double ndx = eta * b.dx[k] + f * nx;
-      double ndy = eta * b.dy[k] + f * ny;
-      double ndz = eta * b.dz[k] + f * nz;
-      if (kk < 0.0) {
-        const double inv = 1.0 / std::sqrt(ndx * ndx + ndy * ndy + ndz * ndz);
-        ndx *= inv;
-        ndy *= inv;
-        ndz *= inv;
+      b.rr[k] = std::max(rr, r * inv_semi);
+      double nx = 0.0, ny = 0.0, nz = 1.0;
+      if constexpr (!kFlat) {
+        // Unit normal, pointing to −z at the vertex.
+        const bool plane_here = planes & (b.miss[k] != 0.0);
+        nx = plane_here ? 0.0 : x / R;
+        ny = plane_here ? 0.0 : y / R;
+        nz = plane_here ? 1.0 : (z - cz) / R;
       }
-      b.dx[k] = ndx;
-      b.dy[k] = ndy;
-      b.dz[k] = ndz;
-      b.t[k] *= (1.0f - refl);
+      const double c = -(nx * dx + ny * dy + nz * dz);
+      const bool flip = c < 0.0;  // orient the normal against the ray
+      b.nx[k] = flip ? -nx : nx;
+      b.ny[k] = flip ? -ny : ny;
+      b.nz[k] = flip ? -nz : nz;
+      b.cos_i[k] = flip ? -c : c;
     }
   }
 }
 
-}  // namespace
+template <bool kStop>
+void intersect(const CompiledEvent& e, Block& b, int count) {
+  if (e.radius == 0.0) {
+    rayParameters<true>(e, b, count);
+    moveToSurface<true, kStop>(e, b, count, false);
+    return;
+  }
+  const bool misses = rayParameters<false>(e, b, count);
+  if (misses) missedSphere(e, b, count);
+  moveToSurface<false, kStop>(e, b, count, misses);
+}
 
-void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0, const double* y0,
-               int count, TracedRays* out, int offset) {
+// Reflectances: ReflectanceTables::lookup written out, lane by lane the same operations, in three
+// loops (index, gather, blend) that each vectorise (AVX2 has a gather).
+FLAREKIT_VECTOR_LOOP void lookupReflectance(const float* __restrict__ table, Block& b, int count) {
+  constexpr int kLast = ReflectanceTables::kSamples - 1;
+  for (int k = 0; k < count; ++k) {
+    const double c0 = b.cos_i[k];
+    const double c = c0 >= 0.0 ? (c0 <= 1.0 ? c0 : 1.0) : 0.0;  // NaN (dead lanes) to 0
+    const double f = c * kLast;
+    const int i = std::min(static_cast<int>(f), kLast - 1);
+    b.weight[k] = f - i;
+    b.index[k] = i;
+  }
+  for (int k = 0; k < count; ++k) {
+    b.r0[k] = table[b.index[k]];
+    b.r1[k] = table[b.index[k] + 1];
+  }
+  for (int k = 0; k < count; ++k) {
+    const float t0 = b.r0[k], t1 = b.r1[k];
+    b.refl[k] = static_cast<float>(t0 + b.weight[k] * (t1 - t0));
+  }
+}
+
+FLAREKIT_VECTOR_LOOP void reflect(Block& b, int count) {
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double c = b.cos_i[k];
+    b.dx[k] += 2.0 * c * b.nx[k];
+    b.dy[k] += 2.0 * c * b.ny[k];
+    b.dz[k] += 2.0 * c * b.nz[k];
+    b.t[k] *= b.refl[k];
+  }
+}
+
+FLAREKIT_VECTOR_LOOP void refract(double eta, Block& b, int count) {
+  int any_tir = 0;
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double c = b.cos_i[k];
+    const double nx = b.nx[k], ny = b.ny[k], nz = b.nz[k];
+    // Vector form of Snell's law.
+    const double kk = 1.0 - eta * eta * (1.0 - c * c);
+    // Total internal reflection: past the critical angle (kk < 0) the ray leaves this path.
+    // r_rel carries the margin 1 − β·kk, which stays below 1 for every transmitted ray and
+    // crosses 1 exactly at the critical angle, so the rasterizer's interpolation puts the TIR
+    // edge of a ghost where it belongs instead of losing every grid cell that touches it. The
+    // ray itself goes on as the grazing refracted ray (kk = 0), continuous with its
+    // transmitted neighbours, so the cells across the edge keep a sensible shape.
+    b.rr[k] = std::max(b.rr[k], 1.0 - kValidityScale * kk);
+    const double f = eta * c - std::sqrt(std::max(kk, 0.0));
+    const double ndx = eta * b.dx[k] + f * nx;
+    const double ndy = eta * b.dy[k] + f * ny;
+    const double ndz = eta * b.dz[k] + f * nz;
+    const bool tir = kk < 0.0;
+    b.dx[k] = ndx;
+    b.dy[k] = ndy;
+    b.dz[k] = ndz;
+    b.tir[k] = tir ? 1.0 : 0.0;
+    any_tir |= tir;
+    b.t[k] *= (1.0f - b.refl[k]);
+  }
+  if (!any_tir) return;
+  // The grazing rays past the critical angle, normalised (only in blocks that have one).
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const double ndx = b.dx[k], ndy = b.dy[k], ndz = b.dz[k];
+    const double inv = 1.0 / std::sqrt(ndx * ndx + ndy * ndy + ndz * ndz);
+    const bool tir = b.tir[k] != 0.0;
+    b.dx[k] = tir ? ndx * inv : ndx;
+    b.dy[k] = tir ? ndy * inv : ndy;
+    b.dz[k] = tir ? ndz * inv : ndz;
+  }
+}
+
+void applyEvent(const CompiledEvent& e, Block& b, int count) {
+  if (e.kind == EventKind::kStop) {
+    intersect<true>(e, b, count);
+    return;
+  }
+  intersect<false>(e, b, count);
+  lookupReflectance(e.reflectance, b, count);
+  if (e.kind == EventKind::kReflect)
+    reflect(b, count);
+  else
+    refract(e.eta, b, count);
+}
+
+// Writes ray `o` of `out` as one that does not reach the image.
+void writeDead(TracedRays* out, size_t o) {
+  out->alive[o] = 0;
+  out->x_mm[o] = out->y_mm[o] = 0.f;
+  out->u[o] = out->v[o] = 0.f;
+  out->r_rel[o] = 1e6f;
+  out->transmission[o] = 0.f;
+}
+
+// Whether lane k may still pass every rim and the stop circle, judged on the values the output
+// will carry (r_rel only grows, the aperture coordinates are fixed at the first stop crossing).
+bool mayPass(const Block& b, int k) {
+  if (b.alive[k] == 0.0 || static_cast<float>(std::min(b.rr[k], 1e6)) > 1.0f) return false;
+  if (b.stop_seen[k] == 0.0) return true;
+  const float u = static_cast<float>(b.u[k]), v = static_cast<float>(b.v[k]);
+  return u * u + v * v <= 1.0f;
+}
+
+// Drops the lanes that can no longer pass (written to `out` as dead) when they are at least half
+// of the block, moving the others to the front; ray[] maps lanes to rays. Returns the lanes left.
+int dropBlocked(Block& b, int live, int* ray, TracedRays* out, int first) {
+  int passing = 0;
+  for (int k = 0; k < live; ++k) passing += mayPass(b, k);
+  if (2 * passing > live) return live;
+  int j = 0;
+  for (int k = 0; k < live; ++k) {
+    if (!mayPass(b, k)) {
+      writeDead(out, static_cast<size_t>(first + ray[k]));
+      continue;
+    }
+    if (j != k) {
+      ray[j] = ray[k];
+      b.px[j] = b.px[k];
+      b.py[j] = b.py[k];
+      b.pz[j] = b.pz[k];
+      b.dx[j] = b.dx[k];
+      b.dy[j] = b.dy[k];
+      b.dz[j] = b.dz[k];
+      b.t[j] = b.t[k];
+      b.rr[j] = b.rr[k];
+      b.u[j] = b.u[k];
+      b.v[j] = b.v[k];
+      b.alive[j] = b.alive[k];
+      b.stop_seen[j] = b.stop_seen[k];
+    }
+    ++j;
+  }
+  return j;
+}
+
+// Traces rays [0, count) whose origins `origin(k, &x, &y)` gives, into `out` from `offset` on.
+// `passing_only`: rays certain to be blocked (past a rim or outside the stop circle) are dropped
+// as soon as they are half of a block, and reported dead.
+template <typename Origin>
+void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Origin origin,
+                 TracedRays* out, int offset, bool passing_only = false) {
   Block b;
+  int ray[kBlock];
   for (int start = 0; start < count; start += kBlock) {
     const int m = std::min(kBlock, count - start);
     for (int k = 0; k < m; ++k) {
-      b.px[k] = x0[start + k];
-      b.py[k] = y0[start + k];
+      origin(start + k, &b.px[k], &b.py[k]);
       b.pz[k] = 0.0;
       b.dx[k] = dir[0];
       b.dy[k] = dir[1];
@@ -212,19 +380,29 @@ void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0,
       b.t[k] = 1.0;
       b.rr[k] = 0.0;
       b.u[k] = b.v[k] = 0.0;
-      b.alive[k] = true;
-      b.stop_seen[k] = false;
+      b.alive[k] = 1.0;
+      b.stop_seen[k] = 0.0;
+      ray[k] = k;
     }
-    for (const CompiledEvent& e : path.events) applyEvent(e, b, m);
-    for (int k = 0; k < m; ++k) {
-      const size_t o = static_cast<size_t>(offset + start + k);
-      bool ok = b.alive[k] && b.dz[k] > 1e-9;
+    int live = m;
+    for (const CompiledEvent& e : path.events) {
+      applyEvent(e, b, live);
+      if (passing_only) live = dropBlocked(b, live, ray, out, offset + start);
+      if (live == 0) break;
+    }
+    for (int k = 0; k < live; ++k) {
+      const size_t o = static_cast<size_t>(offset + start + ray[k]);
+      bool ok = b.alive[k] != 0.0 && b.dz[k] > 1e-9;
       double x = 0, y = 0;
       if (ok) {
         const double s = (path.z_sensor - b.pz[k]) / b.dz[k];
         x = b.px[k] + s * b.dx[k];
         y = b.py[k] + s * b.dy[k];
         ok = std::isfinite(x) && std::isfinite(y) && std::abs(x) < 1e6 && std::abs(y) < 1e6;
+      }
+      if (b.alive[k] == 0.0) {  // a dead ray's state is meaningless (see above)
+        writeDead(out, o);
+        continue;
       }
       out->alive[o] = ok ? 1 : 0;
       out->x_mm[o] = static_cast<float>(x);
@@ -237,20 +415,57 @@ void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0,
   }
 }
 
+}  // namespace
+
+void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0, const double* y0,
+               int count, TracedRays* out, int offset) {
+  traceBlocks(
+      path, dir, count,
+      [&](int k, double* x, double* y) {
+        *x = x0[k];
+        *y = y0[k];
+      },
+      out, offset);
+}
+
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
-               TracedRays* out) {
+               TracedRays* out, bool passing_only) {
   const int n = grid.n;
   out->n = n;
   out->resize(n * n);
-  std::vector<double> xs(static_cast<size_t>(n)), ys(static_cast<size_t>(n));
+  // The whole grid in full blocks (a refined cell's small grid is one block, not one per row),
+  // origins made on the fly.
   const double h = grid.spacing_mm();
-  for (int i = 0; i < n; ++i) xs[static_cast<size_t>(i)] = grid.center_x_mm - grid.half_size_mm + i * h;
-  std::vector<double> y_row(static_cast<size_t>(n));
-  for (int j = 0; j < n; ++j) {
-    const double y = grid.center_y_mm - grid.half_size_mm + j * h;
-    std::fill(y_row.begin(), y_row.end(), y);
-    traceRays(path, dir, xs.data(), y_row.data(), n, out, j * n);
+  const double x_first = grid.center_x_mm - grid.half_size_mm;
+  const double y_first = grid.center_y_mm - grid.half_size_mm;
+  traceBlocks(
+      path, dir, n * n,
+      [&](int k, double* x, double* y) {
+        *x = x_first + (k % n) * h;
+        *y = y_first + (k / n) * h;
+      },
+      out, 0, passing_only);
+}
+
+void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,
+                TracedRays* out) {
+  if (grids.empty()) {
+    out->resize(0);
+    return;
   }
+  const int n = grids.front().n, nn = n * n;
+  out->n = n;
+  out->resize(nn * static_cast<int>(grids.size()));
+  traceBlocks(
+      path, dir, nn * static_cast<int>(grids.size()),
+      [&](int k, double* x, double* y) {
+        const RayGrid& g = grids[static_cast<size_t>(k / nn)];
+        const int l = k % nn;
+        const double h = g.spacing_mm();
+        *x = (g.center_x_mm - g.half_size_mm) + (l % n) * h;
+        *y = (g.center_y_mm - g.half_size_mm) + (l / n) * h;
+      },
+      out, 0);
 }
 
 bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,

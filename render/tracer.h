@@ -76,16 +76,26 @@ struct TracedRays {
   std::vector<float> u, v;        // aperture coordinates at the first stop crossing
   std::vector<float> r_rel;       // max r / semi-aperture (stop crossings after the first count too)
   std::vector<float> transmission;
-  std::vector<uint8_t> alive;     // 0 = missed a sphere, TIR, or never reached the sensor
+  // 0 = never reached the sensor (parallel to a plane it had to cross, or not heading to the
+  // sensor); such a ray has x = y = 0, transmission 0 and, if it died before the sensor,
+  // u = v = 0 and r_rel = 1e6.
+  std::vector<uint8_t> alive;
   void resize(int count);
 };
 
 // Traces `count` rays of direction `dir` from (x0[k], y0[k], 0).
 void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0, const double* y0,
                int count, TracedRays* out, int offset = 0);
-// Traces a grid (out->n = grid.n).
+// Traces a grid (out->n = grid.n). With `passing_only`, for callers that want only the rays that
+// pass every rim and the stop circle (r_rel ≤ 1, u² + v² ≤ 1, as floats): the others may be cut
+// short and reported dead (no work for rays certain to be blocked); those that may pass get the
+// same result as without.
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
-               TracedRays* out);
+               TracedRays* out, bool passing_only = false);
+// Traces grids of one size (grids[g].n = n for all g) one after another, in full blocks:
+// grid g's rays from index g·n² on (out->n = n). Each ray gets the same result as from traceGrid.
+void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,
+                TracedRays* out);
 
 // The point in the z = 0 plane from which a ray of direction `dir` passes the centre of the stop
 // on `path` (found by Newton iteration on the real trace, started from the paraxial guess).

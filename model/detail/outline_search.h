@@ -76,6 +76,7 @@ inline double curvatureRadius(const PowerCubic& c, double a, double b) {
 struct PreparedShape {
   double mx = 0, my = 0;    // M
   double left = 0, right = 0, height = 0;
+  double size2 = 0;  // (L + R + h)²: the scale of B′², pixels²
   std::array<PowerCubic, 2> seg{};
   std::array<int, 2> samples{};  // samples per segment
   std::array<std::array<double, kMaxSamples>, 2> sample_t{}, sample_x{}, sample_y{};
@@ -88,6 +89,13 @@ struct PreparedShape {
   // two minima in a piece need a maximum between them with D ≥ ρ: while every point of the piece
   // is closer to p than ρ, the piece holds at most one local minimum.
   std::array<std::array<double, kMaxSamples>, 2> curvature_radius{};
+  // A lower bound of the radius of curvature over the whole closed outline (the smallest of the
+  // pieces' estimates), or 0 where the outline has corners (Cl = 0 or Cr = 0, where B′ vanishes at
+  // a joint). By Blaschke's rolling theorem (a convex curve whose radius of curvature is ≥ ρ
+  // everywhere lets a disc of radius ρ roll freely inside it), the disc of this radius tangent
+  // from inside at any outline point lies inside the ghost: what certifies inside distances in
+  // certifiedNearest().
+  double min_curvature_radius = 0;
 
   PreparedShape() = default;
   PreparedShape(const GhostParameters& g, int samples_per_segment, double max_turn_deg = 10) {
@@ -96,6 +104,7 @@ struct PreparedShape {
     left = g.left;
     right = g.right;
     height = g.height;
+    size2 = (left + right + height) * (left + right + height);
     const auto outline = ghostOutline(g);
     const cv::Point2d m(mx, my);
     seg[0] = toPowerForm(outline[0], m);
@@ -147,6 +156,13 @@ struct PreparedShape {
         curvature_radius[s][k] = curvatureRadius(seg[s], a, b);
       }
     }
+    // Corners (B′ = 0 at a joint) have no curvature bound: no inside certificate there.
+    const double smallest_curvature = std::min(g.curvature_left, g.curvature_right);
+    min_curvature_radius = 1e308;
+    for (int s = 0; s < 2; ++s)
+      for (int k = 0; k + 1 < samples[s]; ++k)
+        min_curvature_radius = std::min(min_curvature_radius, curvature_radius[s][k]);
+    if (!(smallest_curvature > 1e-6) || !(min_curvature_radius < 1e300)) min_curvature_radius = 0;
   }
 };
 
@@ -422,6 +438,114 @@ inline bool insideRelative(const PreparedShape& s, double x, double y) {
   }
   // y(t) is the outline's height above M at this x (negative, y down); inside below it.
   return y >= c.y(t);
+}
+
+// The fast path of the renderer: Newton on the upper arc from a starting point (the previous
+// pixel's nearest point, or a guess), then an a-posteriori certificate that the point found is the
+// global nearest point of the outline; false when it cannot certify (the caller then runs the
+// full search). The certificates use that the ghost is convex (0 ≤ Cl, Cr ≤ 1):
+//  - outside: the tangent at any outline point B is a supporting line of the ghost, so
+//    dist(p, ghost) ≥ (p − B)·n (n the outward normal there), and dist ≤ |p − B|; both agree to
+//    kDistanceTolerance at a converged foot of the normal, and then B is the nearest point (the
+//    projection onto a convex set);
+//  - inside: the disc of radius ρ = min_curvature_radius tangent from inside at B lies in the
+//    ghost (Blaschke's rolling theorem), so the distance of p to the outline is at least
+//    ρ − |p − c| with c the disc's centre, and at most |p − B|; again both must agree.
+// The sign follows from the same bounds (p outside the supporting half-plane, or inside the
+// disc), except within 1e-7 px of the outline, where the exact inside test decides. On success
+// `c` holds the nearest point (segment 0 or 1, t, d²) and `inside` the sign; both agree with the
+// full search (nearestUpperNewton + insideRelative) to Newton's precision (~1e-10 px). Deep inside
+// (beyond the rolling disc) the converged point is returned as kUnproven: a tight upper bound
+// that lets the full search dismiss most of the outline by its boxes.
+enum class Certificate {
+  kCertified,    // c is the nearest point, `inside` the sign
+  kUnproven,     // Newton converged to c (a good upper bound), but it may not be the nearest point
+  kNotConverged  // c is unchanged
+};
+inline Certificate certifiedNearest(const PreparedShape& s, double px, double py, Candidate& c,
+                                    bool& inside) {
+  int w = c.segment;
+  double t = std::clamp(c.t, 0.0, 1.0);
+  int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
+  bool converged = false;
+  for (int i = 0; i < 12; ++i) {
+    const PowerCubic& seg = s.seg[w];
+    const double bx = seg.x(t) - px, by = seg.y(t) - py;
+    const double dx = seg.dx(t), dy = seg.dy(t);
+    const double f = bx * dx + by * dy;
+    const double speed2 = dx * dx + dy * dy;
+    const double fp = speed2 + bx * seg.ddx(t) + by * seg.ddy(t);
+    // Not in the basin of a minimum, or B′ ≈ 0 (a corner of a Cl = 0 or Cr = 0 outline).
+    if (!(fp > 0) || !(speed2 > 1e-12 * s.size2)) return Certificate::kNotConverged;
+    double next = t - f / fp;
+    if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
+      w = 0;
+      t = 1;
+      continue;
+    }
+    if (next > 1 && w == 0) {
+      w = 1;
+      t = 0;
+      continue;
+    }
+    if (next < 0 || next > 1) {
+      next = std::clamp(next, 0.0, 1.0);
+      if (++clamped >= 2 && next == t) {
+        converged = true;  // the minimum is at the end: the certificate decides
+        break;
+      }
+    } else {
+      clamped = 0;
+    }
+    const double moved = next - t;
+    t = next;
+    // Newton converges quadratically here: after a step of δ pixels the foot is off by about
+    // δ²/ρ, and the distance, stationary in t, by the square of that. Below 1e-3 px: done (the
+    // certificate below bounds the actual error anyway).
+    if (moved * moved * speed2 < 1e-6) {
+      converged = true;
+      break;
+    }
+  }
+  if (!converged) return Certificate::kNotConverged;
+  const PowerCubic& seg = s.seg[w];
+  const double vx = px - seg.x(t), vy = py - seg.y(t);
+  const double d2 = vx * vx + vy * vy;
+  const double d = std::sqrt(d2);
+  const double tx = seg.dx(t), ty = seg.dy(t);
+  c = {w, t, d2};
+  if (d < 1e-7) {  // on the outline: any sign is within 1e-7 px, take the exact one
+    inside = insideRelative(s, px, py);
+    return Certificate::kCertified;
+  }
+  // Outward unit normal: the tangent turned by −90° (the outline runs clockwise as displayed, y
+  // down).
+  const double speed2 = tx * tx + ty * ty;
+  if (!(speed2 > 1e-12 * s.size2)) return Certificate::kUnproven;
+  const double inv_speed = 1 / std::sqrt(speed2);
+  const double nx = ty * inv_speed, ny = -tx * inv_speed;
+  const double vn = vx * nx + vy * ny;
+  if (vn > 0) {
+    inside = false;
+    return d - vn <= kDistanceTolerance ? Certificate::kCertified : Certificate::kUnproven;
+  }
+  const double rho = s.min_curvature_radius;
+  if (!(rho > d)) return Certificate::kUnproven;
+  const double cx = vx + rho * nx, cy = vy + rho * ny;  // p − (B − ρ n)
+  const double lower = rho - std::sqrt(cx * cx + cy * cy);
+  inside = true;
+  return d - lower <= kDistanceTolerance ? Certificate::kCertified : Certificate::kUnproven;
+}
+
+// A starting point for certifiedNearest without a previous pixel: the outline point at the same
+// angle about M on the ellipse through P_L/P_R and P_T (t is nearly proportional to that angle
+// on every segment of this family).
+inline Candidate angleGuess(const PreparedShape& s, double px, double py) {
+  const double ax = px <= 0 ? px / s.left : px / s.right;
+  const double ay = py / s.height;  // ≤ 0 in the upper half
+  const double angle = std::atan2(-ay, std::abs(ax));  // 0 on the axis, π/2 at P_T
+  const double t = std::clamp(angle * (2 / 3.14159265358979323846), 0.0, 1.0);
+  return px <= 0 ? Candidate{0, t, 1e308} : Candidate{1, 1 - t, 1e308};
 }
 
 // The full search on the reflected relative point; returns the upper segment (0 or 1), t and d².
