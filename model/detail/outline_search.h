@@ -462,8 +462,10 @@ enum class Certificate {
   kUnproven,     // Newton converged to c (a good upper bound), but it may not be the nearest point
   kNotConverged  // c is unchanged
 };
-inline Certificate certifiedNearest(const PreparedShape& s, double px, double py, Candidate& c,
-                                    bool& inside) {
+// Always inlined: it runs once per pixel, and GCC's own choice flips with small changes (measured:
+// about 8 % more instructions per frame when it is called).
+[[gnu::always_inline]] inline Certificate certifiedNearest(const PreparedShape& s, double px,
+                                                           double py, Candidate& c, bool& inside) {
   int w = c.segment;
   double t = std::clamp(c.t, 0.0, 1.0);
   int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
@@ -500,9 +502,11 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
     const double moved = next - t;
     t = next;
     // Newton converges quadratically here: after a step of δ pixels the foot is off by about
-    // δ²/ρ, and the distance, stationary in t, by the square of that. Below 1e-3 px: done (the
-    // certificate below bounds the actual error anyway).
-    if (moved * moved * speed2 < 1e-6) {
+    // δ²/ρ, and the distance, stationary in t, by about (δ²/ρ)²/(2d). Below 1e-3·min(1, d) px:
+    // done. Near the outline (small d) the foot must be finer, or the distance error shows where
+    // the transfer function is steepest.
+    const double near2 = std::min(1.0, bx * bx + by * by);
+    if (moved * moved * speed2 < 1e-6 * near2) {
       converged = true;
       break;
     }
