@@ -501,12 +501,11 @@ enum class Certificate {
     }
     const double moved = next - t;
     t = next;
-    // Newton converges quadratically here: after a step of δ pixels the foot is off by about
-    // δ²/ρ, and the distance, stationary in t, by about (δ²/ρ)²/(2d). Below 1e-3·min(1, d) px:
-    // done. Near the outline (small d) the foot must be finer, or the distance error shows where
-    // the transfer function is steepest.
-    const double near2 = std::min(1.0, bx * bx + by * by);
-    if (moved * moved * speed2 < 1e-6 * near2) {
+    // As in refineNearest: a step below 1e-5 px leaves an error of the order of its square. The
+    // foot enters the derivative images directly (the envelope theorem), and the fitter's results
+    // follow them closely: a coarser stop (1e-3 px) saved about 6 % of the instructions per frame but
+    // moved fitted PSNRs in the CLI tests by tenths of a dB.
+    if (moved * moved * speed2 < 1e-10) {
       converged = true;
       break;
     }
