@@ -462,10 +462,8 @@ enum class Certificate {
   kUnproven,     // Newton converged to c (a good upper bound), but it may not be the nearest point
   kNotConverged  // c is unchanged
 };
-// Always inlined: it runs once per pixel, and GCC's own choice flips with small changes (measured:
-// about 8 % more instructions per frame when it is called).
-[[gnu::always_inline]] inline Certificate certifiedNearest(const PreparedShape& s, double px,
-                                                           double py, Candidate& c, bool& inside) {
+inline Certificate certifiedNearest(const PreparedShape& s, double px, double py, Candidate& c,
+                                    bool& inside) {
   int w = c.segment;
   double t = std::clamp(c.t, 0.0, 1.0);
   int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
