@@ -499,10 +499,11 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
     }
     const double moved = next - t;
     t = next;
-    // Newton converges quadratically here: after a step of δ pixels the foot is off by about
-    // δ²/ρ, and the distance, stationary in t, by the square of that. Below 1e-3 px: done (the
-    // certificate below bounds the actual error anyway).
-    if (moved * moved * speed2 < 1e-6) {
+    // As in refineNearest: a step below 1e-5 px leaves an error of the order of its square. The
+    // foot enters the derivative images directly (the envelope theorem), and the fitter's results
+    // follow them closely: a coarser stop (1e-3 px) saved about 6 % of the instructions per frame but
+    // moved fitted PSNRs in the CLI tests by tenths of a dB.
+    if (moved * moved * speed2 < 1e-10) {
       converged = true;
       break;
     }
