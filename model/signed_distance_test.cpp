@@ -14,6 +14,14 @@ namespace {
 // The dense reference of the issue: ≥ 10 000 samples on each of the four segments (no symmetry
 // used), then Newton on the best sample of each segment, and the sign from a point-in-polygon test
 // on the dense polyline (an independent inside test).
+// The unit normal (tangent.y, −tangent.x)/|tangent| of `segment` at t; zero where the tangent
+// vanishes. Test points are placed along it at a chosen signed offset from the outline.
+cv::Point2d unitNormal(const CubicBezier& segment, double t) {
+  const cv::Point2d tangent = segment.derivative(t);
+  const double len = std::hypot(tangent.x, tangent.y);
+  return len > 0 ? cv::Point2d(tangent.y, -tangent.x) / len : cv::Point2d(0, 0);
+}
+
 class DenseReference {
  public:
   explicit DenseReference(const GhostParameters& g) : outline_(ghostOutline(g)) {
@@ -143,9 +151,7 @@ TEST(SignedDistance, MatchesDenseReferenceOverTheWholeParameterRange) {
         // Near the outline: a random outline point moved along its normal within the band.
         const int s = static_cast<int>(unit(rng) * 4) % 4;
         const double t = unit(rng);
-        const cv::Point2d tangent = outline[s].derivative(t);
-        const double len = std::hypot(tangent.x, tangent.y);
-        const cv::Point2d normal = len > 0 ? cv::Point2d(tangent.y, -tangent.x) / len : cv::Point2d(0, 0);
+        const cv::Point2d normal = unitNormal(outline[s], t);
         const double offset = -g.inside_falloff + unit(rng) * (g.inside_falloff + g.outside_falloff);
         p = outline[s].at(t) + offset * normal;
       } else {
@@ -213,9 +219,7 @@ TEST(SignedDistance, RendererFastPathMatchesDenseReferenceWheneverItCertifies) {
       if (attempt % 2 == 0) {
         const int s = static_cast<int>(unit(rng) * 4) % 4;
         const double t = unit(rng);
-        const cv::Point2d tangent = outline[s].derivative(t);
-        const double len = std::hypot(tangent.x, tangent.y);
-        const cv::Point2d normal = len > 0 ? cv::Point2d(tangent.y, -tangent.x) / len : cv::Point2d(0, 0);
+        const cv::Point2d normal = unitNormal(outline[s], t);
         // A third of them within 0.01 px of the outline, where the transfer function is steepest
         // (exponents below 1) and an inexact foot shows most in the distance.
         const double offset = attempt % 3 == 0 ? 0.02 * (unit(rng) - 0.5)
@@ -330,8 +334,7 @@ TEST(SignedDistance, GradientMatchesCentralDifferences) {
       // Near the outline on either side, away from the medial axis.
       const int s = i % 4;
       const double t = 0.05 + 0.9 * unit(rng);
-      const cv::Point2d tangent = outline[s].derivative(t);
-      const cv::Point2d normal = cv::Point2d(tangent.y, -tangent.x) / std::hypot(tangent.x, tangent.y);
+      const cv::Point2d normal = unitNormal(outline[s], t);
       const double offset = (unit(rng) - 0.3) * 4;
       if (std::abs(offset) < 0.05) continue;
       const cv::Point2d p = outline[s].at(t) + offset * normal;
