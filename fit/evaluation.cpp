@@ -105,7 +105,7 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
       cv::Mat radiance = readExrLayer(f.truth_file, "");
       cv::patchNaNs(radiance, 0);
       cv::Mat d;
-      cv::subtract(luminance(f.image), luminance(radiance), d, cv::noArray(), CV_64F);
+      cv::subtract(frame_lum, luminance(radiance), d, cv::noArray(), CV_64F);
       cv::multiply(d, d, d);
       fe.noise_sigma = std::sqrt(cv::mean(d, f.valid)[0]);
       truth = readGhostTruth(f.ghosts_file);
