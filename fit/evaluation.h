@@ -8,12 +8,14 @@
 //  - Ghost centroids (intensity-weighted, over the image) of every model ghost and every true
 //    ghost; a true ghost is visible when its peak exceeds visible_factor × the noise floor (the
 //    issue's rule: 10×). Model and true ghosts are matched greedily by centroid distance within a
-//    gate of max(min_match_px, match_fraction × the true ghost's radius).
+//    gate of max(min_match_px, match_fraction × the true ghost's radius), the radius being √2 ×
+//    its intensity-weighted RMS distance from the centroid (R for a uniform disc of radius R).
 //  - Recall: matched visible true ghosts / visible true ghosts. Precision: model ghosts matched to
 //    any true ghost / model ghosts present. Centroid errors over matched visible pairs.
 //  - Without truth: PSNR of the model against the frame over the pixels where the model exceeds
 //    the noise σ.
-// The noise floor σ is the RMS of frame − truth over valid pixels (truth known), else the robust
+// The noise floor σ is 1.4826 × the median absolute deviation of frame − noise-free radiance over
+// valid pixels (truth known: the background's noise, not the light's shot noise), else the robust
 // estimate of fit/cost.h.
 
 #include <optional>

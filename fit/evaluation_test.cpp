@@ -1,0 +1,111 @@
+// Tests of fit-eval's measures on hand-made frames whose truth is known: the match gate follows a
+// ghost's size, not a caustic's spike on it, and the noise floor is the background's noise, not
+// the shot noise of the light's core.
+#include "fit/evaluation.h"
+
+#include <gtest/gtest.h>
+
+#include "common/exr.h"
+#include "common/testing.h"
+#include "model/model_renderer.h"
+
+namespace flarekit::fit {
+namespace {
+namespace fs = std::filesystem;
+using testing::TempDir;
+
+const cv::Size kSize(200, 130);
+
+model::GhostParameters disc(double x, double y, double radius, double value) {
+  model::GhostParameters g;
+  g.center_x = x;
+  g.center_y = y;
+  g.left = g.right = g.height = radius;
+  g.border = {value, 0, 0};
+  g.inside = {value, 0, 0};
+  g.inside_falloff = 2;
+  g.outside_falloff = 1;
+  return g;
+}
+
+cv::Mat render(const model::GhostParameters& g) {
+  std::vector<model::GhostParameters> one = {g};
+  return model::renderGhosts(one, kSize, 1);
+}
+
+// A model holding `g` unchanged over 0–1°.
+model::FlareModel modelOf(const model::GhostParameters& g) {
+  model::FlareModel m;
+  m.channels = 1;
+  m.capture.image_size = kSize;
+  m.capture.pixel_pitch_um = 10;
+  model::GhostTrack t;
+  t.id = 0;
+  t.angle_min_deg = 0;
+  t.angle_max_deg = 1;
+  for (double v : model::toParameterVector(g)) t.parameters.push_back({{v}});
+  m.ghosts.push_back(t);
+  return m;
+}
+
+// A one-frame stack at θ = 0.5° with its truth files in `dir`: `radiance` is the noise-free frame
+// (light and ghost), `ghost` the ghost's own layer.
+FrameStack stackOf(const TempDir& dir, const cv::Mat& frame, const cv::Mat& radiance, const cv::Mat& ghost) {
+  FrameStack s;
+  s.size = kSize;
+  s.has_truth = true;
+  Frame f;
+  f.angle_deg = 0.5;
+  f.image = frame;
+  f.valid = cv::Mat(kSize, CV_8U, cv::Scalar(255));
+  f.truth_file = dir / "truth.exr";
+  f.ghosts_file = dir / "ghosts.exr";
+  writeExr(f.truth_file, radiance);
+  ExrImage layers;
+  layers.layers.push_back({"ghost.0", ghost});
+  writeExr(f.ghosts_file, layers);
+  s.frames.push_back(f);
+  return s;
+}
+
+TEST(EvaluateModel, MatchGateFollowsTheGhostsSizeNotACausticsSpike) {
+  TempDir dir;
+  // A disc of radius 50 with a caustic's bright spike on its rim (2×2 px at 100× the disc): the
+  // area above 10 % of the peak is 4 px, the disc's is 7850.
+  cv::Mat ghost = render(disc(100, 65, 50, 1e-3));
+  ghost(cv::Rect(99, 17, 2, 2)) += 0.1;
+  // The model's disc 8 px to the right: within a quarter of the radius (12.5 px), well outside the
+  // 3 px gate a spike-sized radius would give.
+  const auto ev = evaluateModel(modelOf(disc(108, 65, 50, 1e-3)), stackOf(dir, ghost, ghost, ghost));
+  ASSERT_EQ(ev.frames.size(), 1u);
+  EXPECT_EQ(ev.true_ghosts_visible, 1);
+  EXPECT_EQ(ev.true_ghosts_found, 1);
+  EXPECT_GT(ev.median_centroid_error_px, 3);
+  EXPECT_LT(ev.median_centroid_error_px, 12.5);
+  EXPECT_DOUBLE_EQ(ev.precision, 1);
+}
+
+TEST(EvaluateModel, NoiseFloorIsTheBackgroundsNotTheLightsShotNoise) {
+  TempDir dir;
+  const model::GhostParameters g = disc(140, 65, 20, 3e-3);
+  const cv::Mat ghost = render(g);
+  // The light's clipped-free core: bright, with shot noise 500× the background's.
+  cv::Mat radiance = ghost.clone();
+  radiance(cv::Rect(30, 45, 40, 40)) += 1.0;
+  cv::Mat noise(kSize, CV_32F);
+  cv::theRNG().state = 7;
+  cv::randn(noise, 0, 1e-4);
+  cv::Mat core_noise(40, 40, CV_32F);
+  cv::randn(core_noise, 0, 0.05);
+  noise(cv::Rect(30, 45, 40, 40)) += core_noise;
+  // The frame-wide RMS of the noise is ~0.012, which would hide a ghost of peak 3e-3 (30× the
+  // background's σ) below the 10 × σ visibility rule.
+  const auto ev = evaluateModel(modelOf(g), stackOf(dir, radiance + noise, radiance, ghost));
+  ASSERT_EQ(ev.frames.size(), 1u);
+  EXPECT_NEAR(ev.frames[0].noise_sigma, 1e-4, 0.2e-4);
+  EXPECT_EQ(ev.true_ghosts_visible, 1);
+  EXPECT_EQ(ev.true_ghosts_found, 1);
+}
+
+}  // namespace
+}  // namespace flarekit::fit
