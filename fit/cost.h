@@ -108,8 +108,9 @@ class FramePyramid {
   mutable std::map<int, FrameData> levels_;
 };
 
-// Robust noise σ of an image: 1.4826 × the median absolute deviation of the luminance of its
-// fainter half (the background), from a subsample.
+// Robust noise σ of an image: 1.4826 × the median absolute deviation of the differences of
+// horizontal neighbours (luminance) over its fainter half (the background), / √2, from a
+// subsample. Differences cancel smooth signal (veils), which the values' own spread would count.
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The cost of one group of ghosts (those that overlap, fitted jointly) in one frame. Holds the

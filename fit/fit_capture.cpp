@@ -352,15 +352,34 @@ class CaptureFitter {
     return g;
   }
 
+  // The light's image in a frame (found once per frame and kept for both sweeps).
+  const LightImage& lightOf(int pos) {
+    auto it = lights_.find(pos);
+    if (it != lights_.end()) return it->second;
+    const Frame& f = frame(pos);
+    const cv::Mat lum = luminance(f.image);
+    return lights_[pos] = findLight(lum, f.valid, estimateNoiseSigma(f.image, f.valid), options_.detection);
+  }
+
+  // The frame minus the light's own image S (detection.h estimateLightImage), S estimated from
+  // the frame minus `ghosts`: the data the ghosts are fitted to and detected in. Without a light
+  // in the frame (or with light_symmetry off) the frame itself.
+  cv::Mat withoutLight(int pos, const std::vector<GhostParameters>& ghosts) {
+    const Frame& f = frame(pos);
+    const LightImage& light = lightOf(pos);
+    if (!light.found || !options_.detection.light_symmetry) return f.image;
+    cv::Mat residual = f.image;
+    if (!ghosts.empty()) residual = f.image - model::renderGhosts(ghosts, f.image.size(), stack_.channels);
+    const cv::Mat light_image = estimateLightImage(residual, f.valid, light, options_.detection);
+    return f.image - light_image;
+  }
+
   void fitFrame(int pos, bool forward) {
     const Frame& f = frame(pos);
     auto t_fit = Clock::now();
-    FramePyramid data(f.image, f.valid, edge_);
-    const double noise_sigma = data.full().noise_sigma;
     FrameFit& record = frame_fits_[pos];
     record.angle_deg = f.angle_deg;
     record.frame = positions_[pos];
-    record.noise_sigma = noise_sigma;
 
     // The ghosts in this frame and their seeds.
     std::vector<int> ids;
@@ -381,7 +400,13 @@ class CaptureFitter {
       }
       ids.push_back(t.id);
     }
-    SolveStats stats = solveFrame(data, ghosts);
+    // Alternate between the light's image and the ghosts (detection.h): S from the frame minus
+    // the seeds, the ghosts fitted to the frame minus S, then S again from the fits for the
+    // detection of new ghosts and the next frame.
+    auto data = std::make_unique<FramePyramid>(withoutLight(pos, ghosts), f.valid, edge_);
+    const double noise_sigma = data->full().noise_sigma;
+    record.noise_sigma = noise_sigma;
+    SolveStats stats = solveFrame(*data, ghosts);
 
     // Ends and records.
     std::vector<int> kept_ids;
@@ -423,7 +448,9 @@ class CaptureFitter {
     // Detection of new ghosts (forward sweep only).
     if (forward && pos % options_.tracking.detect_every == 0) {
       auto t_det = Clock::now();
-      detectNew(pos, data, kept_ids, kept, stats);
+      if (lightOf(pos).found && !kept.empty())
+        data = std::make_unique<FramePyramid>(withoutLight(pos, kept), f.valid, edge_);
+      detectNew(pos, *data, kept_ids, kept, stats);
       seconds_detecting_ += since(t_det);
     }
     record.ghost_ids = kept_ids;
@@ -473,11 +500,14 @@ class CaptureFitter {
     const int kd = detectionFactor();
     const FrameData& level = data.level(kd);
     cv::Mat residual = residualAt(level, ghosts);
-    const LightImage light = findLight(luminance(level.image), level.valid, level.noise_sigma, options_.detection);
+    LightImage light = lightOf(pos);
     FrameFit& record = frame_fits_[pos];
     record.light_found = light.found;
-    record.light_center = light.center * kd;
-    record.light_zone_px = light.zone_radius_px * kd;
+    record.light_center = light.center;
+    record.light_zone_px = light.zone_radius_px;
+    light.center /= kd;
+    light.zone_radius_px /= kd;
+    light.core_radius_px /= kd;
     auto candidates = detectGhosts(residual, level.valid, level.noise_sigma, light, options_.detection);
     for (const auto& c : candidates) {
       GhostParameters grey = c.seed;
@@ -582,7 +612,8 @@ class CaptureFitter {
       std::vector<GhostParameters> all;
       for (const auto& [id, g] : list) all.push_back(g);
       const Frame& f = frame(pos);
-      FramePyramid pyramid(f.image, f.valid, edge_);
+      // Against the frame without the light's image: the light is not a ghost the model failed.
+      FramePyramid pyramid(withoutLight(pos, all), f.valid, edge_);
       const int kd = detectionFactor();
       const FrameData& level = pyramid.level(kd);
       cv::Mat residual = residualAt(level, all);
@@ -652,6 +683,7 @@ class CaptureFitter {
   std::vector<int> positions_;
   std::vector<Track> tracks_;
   std::map<int, FrameFit> frame_fits_;
+  std::map<int, LightImage> lights_;  // by position in the fitted frame list
   int next_id_ = 0;
   int detections_ = 0, rejected_ = 0;
   long long evaluations_ = 0, iterations_ = 0;
@@ -660,13 +692,25 @@ class CaptureFitter {
 
 }  // namespace
 
+cv::Mat frameWithoutLight(const Frame& frame, const DetectionOptions& options) {
+  if (!options.light_symmetry) return frame.image;
+  const LightImage light = findLight(luminance(frame.image), frame.valid,
+                                     estimateNoiseSigma(frame.image, frame.valid), options);
+  if (!light.found) return frame.image;
+  return frame.image - estimateLightImage(frame.image, frame.valid, light, options);
+}
+
 std::vector<GhostParameters> detectSeeds(const Frame& frame, int channels, const FitOptions& options) {
   EdgeFilter edge(options.cost);
-  FramePyramid pyramid(frame.image, frame.valid, edge);
+  LightImage light = findLight(luminance(frame.image), frame.valid,
+                               estimateNoiseSigma(frame.image, frame.valid), options.detection);
+  FramePyramid pyramid(frameWithoutLight(frame, options.detection), frame.valid, edge);
   const int kd = std::max(1, static_cast<int>(std::floor(std::sqrt(frame.image.size().area() / 160000.0))));
   const FrameData& level = pyramid.level(kd);
   const cv::Mat lum = luminance(level.image);
-  const LightImage light = findLight(lum, level.valid, level.noise_sigma, options.detection);
+  light.center /= kd;
+  light.zone_radius_px /= kd;
+  light.core_radius_px /= kd;
   std::vector<GhostParameters> seeds;
   for (const auto& c : detectGhosts(lum, level.valid, level.noise_sigma, light, options.detection)) {
     GhostParameters g = c.seed;
