@@ -96,7 +96,12 @@ struct FrameData {
 // A frame at every level a cost asks for (built on demand; not thread-safe).
 class FramePyramid {
  public:
-  FramePyramid(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge);
+  // `noise_sigma` ≥ 0: the frame's noise σ at full resolution, σ/k at level k (k×k averages of
+  // independent noise), for an image whose own statistics mislead the estimate (the frame minus
+  // the light's image is exactly 0 wherever the light's estimate took the whole residual).
+  // Negative: estimated from each level's image.
+  FramePyramid(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge,
+               double noise_sigma = -1);
   // The frame averaged over k×k blocks (k = 1: the frame itself). Sizes round down.
   const FrameData& level(int factor) const;
   const FrameData& full() const { return level(1); }
@@ -105,6 +110,7 @@ class FramePyramid {
  private:
   cv::Mat image_, valid_;
   const EdgeFilter& edge_;
+  double noise_sigma_ = -1;
   mutable std::map<int, FrameData> levels_;
 };
 

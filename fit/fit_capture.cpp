@@ -358,7 +358,14 @@ class CaptureFitter {
     if (it != lights_.end()) return it->second;
     const Frame& f = frame(pos);
     const cv::Mat lum = luminance(f.image);
-    return lights_[pos] = findLight(lum, f.valid, estimateNoiseSigma(f.image, f.valid), options_.detection);
+    return lights_[pos] = findLight(lum, f.valid, noiseOf(pos), options_.detection);
+  }
+
+  // The noise σ of a frame (of the frame itself: see FramePyramid).
+  double noiseOf(int pos) {
+    auto it = noise_.find(pos);
+    if (it != noise_.end()) return it->second;
+    return noise_[pos] = estimateNoiseSigma(frame(pos).image, frame(pos).valid);
   }
 
   // The frame minus the light's own image S (detection.h estimateLightImage), S estimated from
@@ -384,6 +391,7 @@ class CaptureFitter {
     // The ghosts in this frame and their seeds.
     std::vector<int> ids;
     std::vector<GhostParameters> ghosts;
+    bool extended = false;  // backward: a track reaches this frame for the first time
     for (auto& t : tracks_) {
       if (forward) {
         if (t.ended_high || t.fits.empty()) continue;
@@ -396,14 +404,22 @@ class CaptureFitter {
         } else {
           if (t.ended_low || t.fits.empty() || t.fits.begin()->first < pos) continue;
           ghosts.push_back(seedFor(t, pos));
+          extended = true;
         }
       }
       ids.push_back(t.id);
     }
+    // Backward, with no track extended onto this frame: its ghosts are the ones the forward sweep
+    // fitted here, with nothing new to fit them against; a refit would repeat that solve (it
+    // doubled the time of a capture).
+    if (!forward && !extended) {
+      seconds_fitting_ += since(t_fit);
+      return;
+    }
     // Alternate between the light's image and the ghosts (detection.h): S from the frame minus
     // the seeds, the ghosts fitted to the frame minus S, then S again from the fits for the
     // detection of new ghosts and the next frame.
-    auto data = std::make_unique<FramePyramid>(withoutLight(pos, ghosts), f.valid, edge_);
+    auto data = std::make_unique<FramePyramid>(withoutLight(pos, ghosts), f.valid, edge_, noiseOf(pos));
     const double noise_sigma = data->full().noise_sigma;
     record.noise_sigma = noise_sigma;
     SolveStats stats = solveFrame(*data, ghosts);
@@ -449,7 +465,7 @@ class CaptureFitter {
     if (forward && pos % options_.tracking.detect_every == 0) {
       auto t_det = Clock::now();
       if (lightOf(pos).found && !kept.empty())
-        data = std::make_unique<FramePyramid>(withoutLight(pos, kept), f.valid, edge_);
+        data = std::make_unique<FramePyramid>(withoutLight(pos, kept), f.valid, edge_, noiseOf(pos));
       detectNew(pos, *data, kept_ids, kept, stats);
       seconds_detecting_ += since(t_det);
     }
@@ -613,7 +629,7 @@ class CaptureFitter {
       for (const auto& [id, g] : list) all.push_back(g);
       const Frame& f = frame(pos);
       // Against the frame without the light's image: the light is not a ghost the model failed.
-      FramePyramid pyramid(withoutLight(pos, all), f.valid, edge_);
+      FramePyramid pyramid(withoutLight(pos, all), f.valid, edge_, noiseOf(pos));
       const int kd = detectionFactor();
       const FrameData& level = pyramid.level(kd);
       cv::Mat residual = residualAt(level, all);
@@ -684,6 +700,7 @@ class CaptureFitter {
   std::vector<Track> tracks_;
   std::map<int, FrameFit> frame_fits_;
   std::map<int, LightImage> lights_;  // by position in the fitted frame list
+  std::map<int, double> noise_;       // noise σ by position
   int next_id_ = 0;
   int detections_ = 0, rejected_ = 0;
   long long evaluations_ = 0, iterations_ = 0;
@@ -704,7 +721,8 @@ std::vector<GhostParameters> detectSeeds(const Frame& frame, int channels, const
   EdgeFilter edge(options.cost);
   LightImage light = findLight(luminance(frame.image), frame.valid,
                                estimateNoiseSigma(frame.image, frame.valid), options.detection);
-  FramePyramid pyramid(frameWithoutLight(frame, options.detection), frame.valid, edge);
+  FramePyramid pyramid(frameWithoutLight(frame, options.detection), frame.valid, edge,
+                       estimateNoiseSigma(frame.image, frame.valid));
   const int kd = std::max(1, static_cast<int>(std::floor(std::sqrt(frame.image.size().area() / 160000.0))));
   const FrameData& level = pyramid.level(kd);
   const cv::Mat lum = luminance(level.image);

@@ -33,7 +33,8 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
     auto seeds = detectSeeds(frame, stack.channels, options.fit);
     if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
     // The data the fitter sees: the frame without the light's own image.
-    FramePyramid pyramid(frameWithoutLight(frame, options.fit.detection), frame.valid, edge);
+    FramePyramid pyramid(frameWithoutLight(frame, options.fit.detection), frame.valid, edge,
+                         estimateNoiseSigma(frame.image, frame.valid));
     for (const auto& seed : seeds) {
       std::vector<model::GhostParameters> one = {seed};
       SolverOptions gd = options.fit.solver;
