@@ -267,6 +267,17 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
         g.right = g.left;
         g.center_x = box.x + g.left;
       }
+      // Beside the light, the part of a ghost that overlaps its own reflection about the light
+      // went into the light's estimate (estimateLightImage), so the blob is cut on the light's
+      // side: a blob narrower than tall there keeps its far edge and is seeded round (ghosts of
+      // round apertures are round near the axis), reaching towards the light.
+      if (light.found && options.light_symmetry && box.width < 0.8 * box.height &&
+          g.left == g.right && box.x > 0 && box.x + box.width < W) {
+        const double half = g.height;
+        if (light.center.x > box_center.x) g.center_x = box.x + half;
+        else g.center_x = box.x + box.width - half;
+        g.left = g.right = half;
+      }
       // The blob reaches over the outside fall-off (seeded at 2 px) and the smoothing: the outline
       // lies that much inside its box. A seed outline too large makes a ring of Ib ≈ 0 around the
       // ghost a local minimum when the ghost is brighter inside than at its border.

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <numeric>
 #include <sstream>
 
@@ -361,6 +362,21 @@ class CaptureFitter {
     return lights_[pos] = findLight(lum, f.valid, noiseOf(pos), options_.detection);
   }
 
+  // Distance of a point (capture pixels) from the flare axis of a frame: the line through the
+  // light's image and the image centre, horizontal when the light is outside the frame or at the
+  // centre (detection.cpp uses the same rule).
+  double axisOffset(int pos, cv::Point2d p) {
+    const cv::Point2d center(stack_.size.width / 2.0, stack_.size.height / 2.0);
+    cv::Point2d dir(1, 0);
+    const LightImage& light = lightOf(pos);
+    if (light.found && cv::norm(light.center - center) > 0.05 * stack_.size.width) {
+      dir = light.center - center;
+      dir /= cv::norm(dir);
+    }
+    const cv::Point2d d = p - center;
+    return std::abs(d.x * dir.y - d.y * dir.x);
+  }
+
   // The noise σ of a frame (of the frame itself: see FramePyramid).
   double noiseOf(int pos) {
     auto it = noise_.find(pos);
@@ -429,7 +445,10 @@ class CaptureFitter {
     std::vector<GhostParameters> kept;
     for (size_t i = 0; i < ghosts.size(); ++i) {
       Track& t = track(ids[i]);
-      const std::string reason = endReason(ghosts[i], noise_sigma);
+      std::string reason = endReason(ghosts[i], noise_sigma);
+      if (reason.empty() && axisOffset(pos, {ghosts[i].center_x, ghosts[i].center_y}) >
+                                2 * options_.detection.max_axis_offset * stack_.size.height)
+        reason = "fit left the flare axis";
       const bool had = t.fits.count(pos) > 0;
       if (!reason.empty()) {
         if (forward) {
@@ -544,7 +563,21 @@ class CaptureFitter {
         continue;
       }
       std::vector<GhostParameters> one = {seed};
-      GroupCost cost(data, edge_, ghosts, one, options_.cost);
+      // Where the candidate overlaps its own reflection about the light (beside the light, a
+      // ghost reaching over the light's centre) the light's estimate took part of it: estimate
+      // the light again with the candidate's seed counted as a ghost, and fit it to that.
+      const FramePyramid* fit_data = &data;
+      std::unique_ptr<FramePyramid> own;
+      cv::Mat own_residual;
+      if (light.found && options_.detection.light_symmetry) {
+        std::vector<GhostParameters> with = ghosts;
+        with.push_back(seed);
+        own = std::make_unique<FramePyramid>(withoutLight(pos, with), frame(pos).valid, edge_, noiseOf(pos));
+        fit_data = own.get();
+        own_residual = residualAt(own->level(kd), ghosts);
+      }
+      const cv::Mat& blob_residual = own ? own_residual : residual;
+      GroupCost cost(*fit_data, edge_, ghosts, one, options_.cost);
       GhostParameters dark = seed;
       dark.border = {0, 0, 0};
       dark.inside = {0, 0, 0};
@@ -567,14 +600,19 @@ class CaptureFitter {
         for (int y = 0; y < c.blob.height; ++y)
           for (int x = 0; x < c.blob.width; ++x) {
             if (!c.mask.at<uchar>(y, x)) continue;
-            const double v = residual.at<float>(c.blob.y + y, c.blob.x + x);
+            const double v = blob_residual.at<float>(c.blob.y + y, c.blob.x + x);
             b.push_back(std::abs(v));
             a.push_back(std::abs(v - rendered.at<float>(y, x)));
           }
         before = medianOf(b);
         after = medianOf(a);
       }
-      const bool explains = after <= (1 - options_.tracking.min_cost_reduction) * before;
+      // Ghosts are mirror-symmetric about the axis through the light's image and the image centre
+      // (Walch et al. 2018 §3.2): a fit whose centre left the axis drew a starburst line or a
+      // piece of the halo, not a ghost.
+      const bool on_axis = axisOffset(pos, {g.center_x, g.center_y}) <=
+                           options_.detection.max_axis_offset * stack_.size.height;
+      const bool explains = on_axis && after <= (1 - options_.tracking.min_cost_reduction) * before;
       bool dup_after = false;
       for (const auto& o : ghosts)
         if (sameGhost(g, o)) dup_after = true;
@@ -586,7 +624,7 @@ class CaptureFitter {
           << " → (" << g.center_x << ", " << g.center_y << ") L " << g.left << " R " << g.right
           << " h " << g.height << " Ib " << g.border[0] << " Ii " << g.inside[0] << "; cost "
           << cost_without << " → " << r.final_cost << ", blob residual " << before << " → " << after
-          << (explains ? "" : " (does not explain)")
+          << (on_axis ? "" : " (off the axis)") << (explains ? "" : " (does not explain)")
           << (dup_after ? " (duplicate)" : "") << " " << endReason(g, noise_sigma);
         logDebug(m.str());
       }
