@@ -42,6 +42,10 @@ struct DetectionOptions {
   // core_margin), and ghosts beside or inside the halo and starburst are found.
   bool light_symmetry = true;
   double core_margin = 1.5;  // (≥ 1)
+  // Fit each candidate beside the light against a light estimate that counts the candidate's seed
+  // as a ghost. Off by default: from detection seeds (rim-bright, dark inside) the estimate gets
+  // worse, not better (Heliar 0–10°: no candidate explained its blob any more).
+  bool refit_light_with_candidate = false;
   // Gaussian smoothing of the residual before the symmetric part is taken, pixels (≥ 0; 0 =
   // none). The minimum of two noisy values is biased low by 0.56 σ, which smoothing would shrink,
   // but the starburst's lines are a pixel wide: frame − S then keeps their edges. Measured on the

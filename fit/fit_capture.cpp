@@ -569,7 +569,7 @@ class CaptureFitter {
       const FramePyramid* fit_data = &data;
       std::unique_ptr<FramePyramid> own;
       cv::Mat own_residual;
-      if (light.found && options_.detection.light_symmetry) {
+      if (light.found && options_.detection.light_symmetry && options_.detection.refit_light_with_candidate) {
         std::vector<GhostParameters> with = ghosts;
         with.push_back(seed);
         own = std::make_unique<FramePyramid>(withoutLight(pos, with), frame(pos).valid, edge_, noiseOf(pos));
