@@ -116,9 +116,10 @@ class FramePyramid {
 
 // Robust noise σ of an image: 1.4826 × the median absolute deviation of the luminance of its
 // fainter half (the background), from a subsample. Known bias (measured, not yet changed because
-// detection levels and the fitter's tests are tuned to it): 0.74× the true σ on Gaussian test
-// frames, 2.7× on lit Heliar frames, up to 11× once the light has left the frame (frame-filling
-// veils make the spread); an estimate from neighbour differences was within 25 % on all three.
+// detection levels and the fitter's tests are tuned to it): 0.6× the true σ on the Gaussian CLI
+// test frames (0.0061 for 0.01), 2.7× the background's on lit Heliar frames, 5–10× once the light
+// has left the frame (14–16°: frame-filling veils make the spread); an estimate from differences
+// of horizontal neighbours was within 30 % on all three.
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The cost of one group of ghosts (those that overlap, fitted jointly) in one frame. Holds the
