@@ -87,14 +87,19 @@ FrameData FrameData::make(const cv::Mat& image, const cv::Mat& valid, const Edge
   return d;
 }
 
-FramePyramid::FramePyramid(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge)
-    : image_(image), valid_(valid), edge_(edge) {}
+FramePyramid::FramePyramid(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge,
+                           double noise_sigma)
+    : image_(image), valid_(valid), edge_(edge), noise_sigma_(noise_sigma) {}
 
 const FrameData& FramePyramid::level(int factor) const {
   factor = std::max(1, factor);
   auto it = levels_.find(factor);
   if (it != levels_.end()) return it->second;
-  if (factor == 1) return levels_[1] = FrameData::make(image_, valid_, edge_, 1);
+  if (factor == 1) {
+    levels_[1] = FrameData::make(image_, valid_, edge_, 1);
+    if (noise_sigma_ >= 0) levels_[1].noise_sigma = noise_sigma_;
+    return levels_[1];
+  }
   const cv::Size size(std::max(1, image_.cols / factor), std::max(1, image_.rows / factor));
   const cv::Rect crop(0, 0, size.width * factor, size.height * factor);
   cv::Mat image, valid;
@@ -105,7 +110,9 @@ const FrameData& FramePyramid::level(int factor) const {
   invalid.convertTo(invalid_f, CV_32F, 1.0 / 255);
   cv::resize(invalid_f, any_invalid, size, 0, 0, cv::INTER_AREA);
   valid = any_invalid <= 0;
-  return levels_[factor] = FrameData::make(image, valid, edge_, factor);
+  levels_[factor] = FrameData::make(image, valid, edge_, factor);
+  if (noise_sigma_ >= 0) levels_[factor].noise_sigma = noise_sigma_ / factor;
+  return levels_[factor];
 }
 
 // ── Bounds ────────────────────────────────────────────────────────────────────────────────────

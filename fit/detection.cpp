@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include <opencv2/imgproc.hpp>
@@ -21,9 +22,75 @@ bool DetectionOptions::IsValid(std::string* error) const {
   if (!(max_axis_offset > 0)) return fail("max_axis_offset must be > 0");
   if (!(light_zone_sigma > 0)) return fail("light_zone_sigma must be > 0");
   if (!(zone_margin >= 1)) return fail("zone_margin must be ≥ 1");
+  if (!(core_margin >= 1)) return fail("core_margin must be ≥ 1");
+  if (!(light_smoothing_px >= 0)) return fail("light_smoothing_px must be ≥ 0");
   if (max_new_per_frame < 1) return fail("max_new_per_frame must be ≥ 1");
   return true;
 }
+
+namespace {
+
+// The centre of point symmetry of the light's image near `light.center`: the saturated core's
+// centroid is off by a fraction of a pixel (clipping is uneven where a ghost or the halo's slope
+// crosses the core), and the starburst's fine lines make S(p) = min(R(p), R(2c − p)) leave
+// speckle behind unless c is right to a tenth of a pixel. Minimises Σ |R(p) − R(2c − p)| over the
+// brightest unsaturated pixels of the zone (where the light rules), coarse to fine.
+cv::Point2d refineLightCenter(const cv::Mat& luminance, const cv::Mat& valid, const LightImage& light,
+                              const DetectionOptions& options) {
+  const double radius = std::max(light.core_radius_px * 3, light.zone_radius_px);
+  const cv::Rect zone = cv::Rect(cvFloor(light.center.x - radius), cvFloor(light.center.y - radius),
+                                 cvCeil(2 * radius), cvCeil(2 * radius)) &
+                        cv::Rect(0, 0, luminance.cols, luminance.rows);
+  if (zone.area() < 16) return light.center;
+  cv::Mat smooth;
+  cv::GaussianBlur(luminance, smooth, cv::Size(0, 0), std::max(0.5, options.light_smoothing_px));
+  // The pixels that carry the light: the brightest quarter of the zone's unsaturated ones.
+  std::vector<std::pair<float, cv::Point>> pixels;
+  for (int y = zone.y; y < zone.y + zone.height; ++y)
+    for (int x = zone.x; x < zone.x + zone.width; ++x)
+      if (valid.at<uchar>(y, x)) pixels.push_back({smooth.at<float>(y, x), {x, y}});
+  if (pixels.size() < 16) return light.center;
+  const size_t keep = std::min<size_t>(pixels.size() / 4, 20000);
+  std::nth_element(pixels.begin(), pixels.begin() + keep, pixels.end(),
+                   [](const auto& a, const auto& b) { return a.first > b.first; });
+  pixels.resize(keep);
+  auto asymmetry = [&](cv::Point2d c) {
+    double sum = 0;
+    int used = 0;
+    for (const auto& [v, p] : pixels) {
+      // Bilinear sample at the mirror of the pixel centre (p + ½ → 2c − p − ½).
+      const double mx = 2 * c.x - p.x - 1, my = 2 * c.y - p.y - 1;
+      const int x0 = cvFloor(mx), y0 = cvFloor(my);
+      if (x0 < 0 || y0 < 0 || x0 + 1 >= luminance.cols || y0 + 1 >= luminance.rows) continue;
+      if (!valid.at<uchar>(y0, x0) || !valid.at<uchar>(y0 + 1, x0 + 1) ||
+          !valid.at<uchar>(y0, x0 + 1) || !valid.at<uchar>(y0 + 1, x0))
+        continue;
+      const double fx = mx - x0, fy = my - y0;
+      const double m = (1 - fy) * ((1 - fx) * smooth.at<float>(y0, x0) + fx * smooth.at<float>(y0, x0 + 1)) +
+                       fy * ((1 - fx) * smooth.at<float>(y0 + 1, x0) + fx * smooth.at<float>(y0 + 1, x0 + 1));
+      sum += std::abs(v - m);
+      ++used;
+    }
+    return used > 0 ? sum / used : std::numeric_limits<double>::infinity();
+  };
+  cv::Point2d best = light.center;
+  double best_value = asymmetry(best);
+  for (double step : {0.5, 0.125}) {
+    const cv::Point2d start = best;
+    for (int j = -4; j <= 4; ++j)
+      for (int i = -4; i <= 4; ++i) {
+        const cv::Point2d c = start + cv::Point2d(i * step, j * step);
+        const double a = asymmetry(c);
+        if (a < best_value) {
+          best_value = a;
+          best = c;
+        }
+      }
+  }
+  return best;
+}
+
+}  // namespace
 
 LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double noise_sigma,
                      const DetectionOptions& options) {
@@ -41,6 +108,7 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
   light.found = true;
   light.center = {centroids.at<double>(best, 0) + 0.5, centroids.at<double>(best, 1) + 0.5};
   const double core = std::sqrt(best_area / std::numbers::pi);
+  light.core_radius_px = core;
   // The zone: where the azimuthal median (robust to ghosts crossing a few directions) falls to
   // the frame's median plus light_zone_sigma noise σ. The halo and starburst are point-symmetric
   // about the light; ghosts are not, so the median follows the former.
@@ -68,7 +136,47 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
     if (ring[ring.size() / 2] < floor_level) break;
   }
   light.zone_radius_px = zone * options.zone_margin;
+  light.center = refineLightCenter(luminance, valid, light, options);
   return light;
+}
+
+cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const LightImage& light,
+                           const DetectionOptions& options) {
+  cv::Mat light_image = cv::Mat::zeros(residual.size(), residual.type());
+  if (!light.found) return light_image;
+  // A new buffer: blurring into a header that shares `residual`'s data would blur the caller's
+  // frame in place.
+  cv::Mat smooth;
+  if (options.light_smoothing_px > 0)
+    cv::GaussianBlur(residual, smooth, cv::Size(0, 0), options.light_smoothing_px,
+                     options.light_smoothing_px, cv::BORDER_REPLICATE);
+  else
+    smooth = residual.clone();
+  // Pixel i has its centre at i + ½, so the reflection 2c − p maps index i to 2c − 1 − i.
+  const cv::Matx23d reflect(-1, 0, 2 * light.center.x - 1, 0, -1, 2 * light.center.y - 1);
+  const float unknown = std::numeric_limits<float>::quiet_NaN();
+  cv::Mat mirrored, mirrored_valid;
+  cv::warpAffine(smooth, mirrored, reflect, smooth.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
+                 cv::BORDER_CONSTANT, cv::Scalar::all(unknown));
+  cv::warpAffine(valid, mirrored_valid, reflect, valid.size(), cv::INTER_NEAREST | cv::WARP_INVERSE_MAP,
+                 cv::BORDER_CONSTANT, cv::Scalar(255));
+  const int channels = residual.channels();
+  for (int y = 0; y < residual.rows; ++y) {
+    const float* r = smooth.ptr<float>(y);
+    const float* m = mirrored.ptr<float>(y);
+    const uchar* mv = mirrored_valid.ptr<uchar>(y);
+    float* s = light_image.ptr<float>(y);
+    for (int x = 0; x < residual.cols; ++x)
+      for (int c = 0; c < channels; ++c) {
+        const int i = x * channels + c;
+        float v;
+        if (std::isnan(m[i])) v = 0;          // the mirror point is outside the frame
+        else if (!mv[x]) v = r[i];            // beside the core: the light rules
+        else v = std::min(r[i], m[i]);
+        s[i] = std::max(0.0f, v);
+      }
+  }
+  return light_image;
 }
 
 std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& valid,
@@ -82,7 +190,9 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
   cv::Mat allowed = valid.clone();
   if (light.found)
     cv::circle(allowed, cv::Point(cvRound(light.center.x), cvRound(light.center.y)),
-               cvRound(light.zone_radius_px), cv::Scalar(0), cv::FILLED);
+               cvRound(options.light_symmetry ? light.core_radius_px * options.core_margin
+                                              : light.zone_radius_px),
+               cv::Scalar(0), cv::FILLED);
   // The axis: through the light and the image centre (horizontal for a pan rig without roll).
   const cv::Point2d center(W / 2.0, H / 2.0);
   cv::Point2d dir(1, 0);
@@ -156,6 +266,17 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
         g.left = std::max(g.left, g.height);
         g.right = g.left;
         g.center_x = box.x + g.left;
+      }
+      // Beside the light, the part of a ghost that overlaps its own reflection about the light
+      // went into the light's estimate (estimateLightImage), so the blob is cut on the light's
+      // side: a blob narrower than tall there keeps its far edge and is seeded round (ghosts of
+      // round apertures are round near the axis), reaching towards the light.
+      if (light.found && options.light_symmetry && box.width < 0.8 * box.height &&
+          g.left == g.right && box.x > 0 && box.x + box.width < W) {
+        const double half = g.height;
+        if (light.center.x > box_center.x) g.center_x = box.x + half;
+        else g.center_x = box.x + box.width - half;
+        g.left = g.right = half;
       }
       // The blob reaches over the outside fall-off (seeded at 2 px) and the smoothing: the outline
       // lies that much inside its box. A seed outline too large makes a ring of Ib ≈ 0 around the

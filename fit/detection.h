@@ -28,13 +28,30 @@ struct DetectionOptions {
   int min_area_px = 30;
   // A blob's centroid may lie at most this far from the axis (light–centre line), as a fraction
   // of the image height (> 0).
-  double max_axis_offset = 0.06;
+  // 0.06 let starburst lines 27 px off the axis through (Heliar capture, 8°); the true ghosts'
+  // centres lie within 0.5 px of it there.
+  double max_axis_offset = 0.03;
   // The light's zone reaches where the azimuthal median around the light falls below this many
   // noise σ above the frame's median, times zone_margin (≥ 1). Blobs inside are ignored.
   double light_zone_sigma = 50;
   double zone_margin = 1.15;
   // At most this many new ghosts per frame (≥ 1).
   int max_new_per_frame = 4;
+  // Separate the light's own image by its point symmetry (estimateLightImage) instead of keeping
+  // out of the whole light zone: detection then keeps out of the clipped core only (its radius ×
+  // core_margin), and ghosts beside or inside the halo and starburst are found.
+  bool light_symmetry = true;
+  double core_margin = 1.5;  // (≥ 1)
+  // Fit each candidate beside the light against a light estimate that counts the candidate's seed
+  // as a ghost. Off by default: from detection seeds (rim-bright, dark inside) the estimate gets
+  // worse, not better (Heliar 0–10°: no candidate explained its blob any more).
+  bool refit_light_with_candidate = false;
+  // Gaussian smoothing of the residual before the symmetric part is taken, pixels (≥ 0; 0 =
+  // none). The minimum of two noisy values is biased low by 0.56 σ, which smoothing would shrink,
+  // but the starburst's lines are a pixel wide: frame − S then keeps their edges. Measured on the
+  // Heliar capture (RMS of frame − S − true ghosts, 2°–6°): 0.46–0.52e-3 unsmoothed, 0.77–0.84e-3
+  // at 0.5 px, 1.65–1.68e-3 at 1 px.
+  double light_smoothing_px = 0;
 
   bool IsValid(std::string* error) const;
 };
@@ -44,12 +61,28 @@ struct LightImage {
   bool found = false;        // false: the light is outside the frame (no saturated core)
   cv::Point2d center;        // image pixels
   double zone_radius_px = 0; // core + halo + starburst: detection keeps out of this disc
+  double core_radius_px = 0; // the clipped core (radius of a disc of its area)
 };
 
 // Finds the light: the centroid of the largest saturated (or brightest) blob; its zone from the
 // azimuthal median profile around it. `valid` is the frame's mask (0 = saturated / non-finite).
 LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double noise_sigma,
                      const DetectionOptions& options);
+
+// The light's own image in `residual` (CV_32FC1/3: the frame minus the ghosts modelled so far):
+// its clipped core, halo and starburst. Those are point-symmetric about the light's image centre c
+// (the starburst is the power spectrum of the aperture, |F|² of a real function; the halo is
+// radial), while the ghosts lie elsewhere on the axis through c and the image centre (Walch et al.
+// 2018 §3.2, Fig. 3) and are not, so the light is estimated as
+//   S(p) = max(0, min(R̃(p), R̃(2c − p)))
+// with R̃ the residual smoothed by light_smoothing_px: where a ghost covers p, its mirror point
+// shows the light alone. Where 2c − p is saturated (the core's reflection: p is beside the core,
+// ruled by the light) S = R̃(p); where 2c − p is outside the frame nothing is known and S = 0.
+// A ghost centred on c itself (θ ≈ 0) is symmetric too and goes into S: fitters alternate between
+// S and the ghosts (fit S from frame − ghosts, ghosts to frame − S). Returns zeros when the light
+// is not found. Same size and type as `residual`.
+cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const LightImage& light,
+                           const DetectionOptions& options);
 
 // A candidate ghost.
 struct Detection {

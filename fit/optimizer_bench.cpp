@@ -32,7 +32,9 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
     const Frame& frame = stack.frames[index];
     auto seeds = detectSeeds(frame, stack.channels, options.fit);
     if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
-    FramePyramid pyramid(frame.image, frame.valid, edge);
+    // The data the fitter sees: the frame without the light's own image.
+    FramePyramid pyramid(frameWithoutLight(frame, options.fit.detection), frame.valid, edge,
+                         estimateNoiseSigma(frame.image, frame.valid));
     for (const auto& seed : seeds) {
       std::vector<model::GhostParameters> one = {seed};
       SolverOptions gd = options.fit.solver;
