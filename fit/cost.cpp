@@ -19,6 +19,7 @@ bool CostOptions::IsValid(std::string* error) const {
   if (!(region_margin_px >= 0) || !(region_margin_px <= 1000)) return fail("region_margin_px must be in [0, 1000]");
   if (!(loss_scale >= 0) || !std::isfinite(loss_scale)) return fail("loss_scale must be ≥ 0");
   if (max_pixels < 1000) return fail("max_pixels must be ≥ 1000");
+  if (!(prior_fraction >= 0) || !std::isfinite(prior_fraction)) return fail("prior_fraction must be ≥ 0");
   return true;
 }
 
@@ -199,6 +200,14 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
     for (int c = 0; c < channels_; ++c) scale = std::max({scale, g.border[c], g.inside[c]});
   scale_ = std::max({scale, 3 * frame.noise_sigma, 1e-12});
 
+  if (options.prior_fraction > 0)
+    for (const auto& g : seeds) {
+      const double length = options.prior_fraction * std::max({g.left, g.right, g.height}) + 1;
+      prior_center_.push_back({g.center_x - g.left, g.center_x + g.right, g.center_y, g.height,
+                               g.curvature_left, g.curvature_right});
+      prior_sigma_.push_back({length, length, length, length, options.prior_fraction, options.prior_fraction});
+    }
+
   const int stride = levelFor(region_.area(), options.max_pixels);
   for (int y = stride / 2; y < region_.height; y += stride) {
     const uchar* v = data_valid_.ptr<uchar>(y);
@@ -222,6 +231,14 @@ double GroupCost::evaluate(std::span<const model::GhostParameters> input, bool j
   if (region_.empty()) {
     has_jacobians_ = jacobians;
     return 0;
+  }
+  prior_cost_ = 0;
+  if (priorResidualCount() > 0) {
+    std::vector<double> r(kPriorParameters);
+    for (int g = 0; g < ghost_count_; ++g) {
+      priorResiduals(g, model::toParameterVector(input[g]).data(), r.data(), nullptr);
+      for (double v : r) prior_cost_ += 0.5 * v * v;
+    }
   }
   // Ceres keeps parameters within bounds; a caller (the GD baseline) may step onto the edge.
   std::vector<model::GhostParameters> ghosts;
@@ -318,6 +335,31 @@ void GroupCost::sampleJacobian(int sample, int ghost, double* jacobian) const {
   }
 }
 
+void GroupCost::priorResiduals(int ghost, const double* parameters, double* residuals,
+                               double* jacobian) const {
+  using namespace model::param;
+  const int n = parameters_per_ghost_;
+  if (jacobian) std::fill(jacobian, jacobian + kPriorParameters * n, 0.0);
+  // The outline's left and right points, its axis, height and curvatures. Not Mx itself: with
+  // P_L and P_R fixed, moving Mx only slides the top and bottom points along a nearly flat
+  // outline, a direction the data barely sees and a prior on Mx would pull along.
+  const double* s = prior_center_[ghost].data();
+  const double* sigma = prior_sigma_[ghost].data();
+  const double value[kPriorParameters] = {parameters[kMx] - parameters[kL], parameters[kMx] + parameters[kR],
+                                          parameters[kMy], parameters[kH], parameters[kCl], parameters[kCr]};
+  for (int k = 0; k < kPriorParameters; ++k) residuals[k] = (value[k] - s[k]) / sigma[k];
+  if (!jacobian) return;
+  auto set = [&](int row, int column, double v) { jacobian[row * n + column] = v / sigma[row]; };
+  set(0, kMx, 1);
+  set(0, kL, -1);
+  set(1, kMx, 1);
+  set(1, kR, 1);
+  set(2, kMy, 1);
+  set(3, kH, 1);
+  set(4, kCl, 1);
+  set(5, kCr, 1);
+}
+
 double GroupCost::loss(double u) const {
   if (options_.loss_scale <= 0) return u;
   const double b = options_.loss_scale * options_.loss_scale;
@@ -325,7 +367,7 @@ double GroupCost::loss(double u) const {
 }
 
 double GroupCost::totalCost() const {
-  if (residual_data_.empty()) return 0;
+  if (residual_data_.empty()) return prior_cost_;
   double cost = 0;
   std::vector<double> r(2 * channels_);
   for (size_t i = 0; i < samples_.size(); ++i) {
@@ -334,7 +376,7 @@ double GroupCost::totalCost() const {
     for (double v : r) u += v * v;
     cost += loss(u);
   }
-  return 0.5 * cost;
+  return 0.5 * cost + prior_cost_;
 }
 
 }  // namespace flarekit::fit

@@ -37,6 +37,14 @@
 // pixel's centre, the frame's are area averages: for the smooth fall-offs of ghosts the two agree
 // and an edge's position is unbiased by symmetry.
 //
+// Shape prior (ours): ½ Σ_k ((p_k − s_k)/σ_k)² over the outline's left and right points
+// (Mx − L, Mx + R), its axis My, height h and curvatures Cl, Cr of every ghost, s its seed (in tracking, the extrapolation from the neighbouring frames).
+// Where the frame shows a parameter, the data's thousands of residuals outweigh it; where it does
+// not (the part of a ghost beyond the frame's edge, the far side of a ghost cut by the light's
+// clipped core) it keeps the parameter where the track says instead of letting it drift to a
+// bound: measured on the Heliar capture, a ghost cropped by the frame had its unseen R run from
+// 218 px to 714 px over two frames without it.
+//
 // Derivatives: the model is linear in nothing but Ib, Ii, yet every parameter's derivative image
 // is analytic (model/'s renderer, envelope theorem at the fixed nearest point); E is linear, so
 // the Jacobian of r_edge is E applied to those images.
@@ -61,6 +69,10 @@ struct CostOptions {
   double region_margin_px = 6;   // the fitted region reaches this far beyond the ghosts (≥ 0)
   double loss_scale = 0.2;       // Cauchy loss scale in normalised units; 0 = plain least squares
   int max_pixels = 12000;        // larger regions are fitted on a coarser level (≥ 1000)
+  // Shape prior (see the top of this file): σ of the prior on the outline's left and right points,
+  // its axis and h as a fraction of the seed's size max(L, R, h) (plus 1 px), and on Cl, Cr in
+  // curvature units; 0 = no prior.
+  double prior_fraction = 1.0;
 
   bool IsValid(std::string* error) const;
 };
@@ -163,6 +175,11 @@ class GroupCost {
   void sampleJacobian(int sample, int ghost, double* jacobian) const;
   bool hasJacobians() const { return has_jacobians_; }
 
+  // The shape prior (see above): residuals per ghost, and their Jacobian row-major
+  // [priorResidualCount() × parametersPerGhost()] when `jacobian` is not null.
+  int priorResidualCount() const { return prior_sigma_.empty() ? 0 : kPriorParameters; }
+  void priorResiduals(int ghost, const double* parameters, double* residuals, double* jacobian) const;
+
   // The Cauchy loss ρ(u) of this cost (u = squared norm of a sample's residuals).
   double loss(double squared_norm) const;
   // The cost from the stored residuals.
@@ -193,6 +210,10 @@ class GroupCost {
   std::vector<std::vector<cv::Rect>> jacobian_rect_;  // where each image is non-zero (region coords)
   bool has_jacobians_ = false;
   long long evaluations_ = 0;
+  // Shape prior on P_L = Mx − L, P_R = Mx + R, My, h, Cl, Cr.
+  static constexpr int kPriorParameters = 6;
+  std::vector<std::vector<double>> prior_center_, prior_sigma_;  // [ghost][k]
+  double prior_cost_ = 0;  // at the last evaluated point
 };
 
 // The extra bounds a fitter uses on top of model::parameterBounds: lengths and fall-offs within

@@ -210,5 +210,32 @@ TEST(SolveGroup, IgnoresSaturatedPixels) {
   EXPECT_NEAR(r.ghosts[0].left, 20, 0.2);
 }
 
+TEST(SolveGroup, ShapePriorHoldsWhatTheFrameDoesNotShow) {
+  // A ghost whose right part lies beyond the frame's edge: its R is not in the data. The fit must
+  // find what is seen (left edge Mx − L, h) from a seed 3–4 px off, and keep R near its seed
+  // instead of letting it wander.
+  const cv::Size size(100, 80);
+  std::vector<GhostParameters> truth = {ghost(88, 40, 24, 24, 18, 1.0, 0.5)};
+  cv::Mat frame = addNoise(model::renderGhosts(truth, size, 1), 0.01, 3);
+  cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  CostOptions options;
+  EdgeFilter edge(options);
+  FramePyramid data(frame, valid, edge);
+  std::vector<GhostParameters> seeds = truth;
+  seeds[0].center_x += 3;
+  seeds[0].left += 4;
+  seeds[0].right = 30;
+  seeds[0].height -= 3;
+  options.prior_fraction = 1.0;
+  SolverOptions solver;
+  solver.max_iterations = 50;
+  GroupCost cost(data, edge, {}, seeds, options);
+  auto r = solveGroup(cost, seeds, solver);
+  const auto& g = r.ghosts[0];
+  EXPECT_NEAR(g.center_x - g.left, 64, 0.2);
+  EXPECT_NEAR(g.height, 18, 0.2);
+  EXPECT_NEAR(g.center_x + g.right, seeds[0].center_x + seeds[0].right, 0.25 * 30);
+}
+
 }  // namespace
 }  // namespace flarekit::fit

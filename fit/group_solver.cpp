@@ -109,6 +109,23 @@ class PixelResidual : public ceres::CostFunction {
   int sample_;
 };
 
+// The shape prior of one ghost (fit/cost.h), an analytic block on that ghost's parameters.
+class PriorResidual : public ceres::CostFunction {
+ public:
+  PriorResidual(const GroupCost& cost, int ghost) : cost_(cost), ghost_(ghost) {
+    set_num_residuals(cost.priorResidualCount());
+    mutable_parameter_block_sizes()->push_back(cost.parametersPerGhost());
+  }
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    cost_.priorResiduals(ghost_, parameters[0], residuals, jacobians ? jacobians[0] : nullptr);
+    return true;
+  }
+
+ private:
+  const GroupCost& cost_;
+  int ghost_;
+};
+
 class TraceCallback : public ceres::IterationCallback {
  public:
   TraceCallback(const GroupCost& cost, Clock::time_point t0, std::vector<TracePoint>& trace)
@@ -150,6 +167,9 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   loss.reset(cost.lossScale() > 0 ? new ceres::CauchyLoss(cost.lossScale()) : nullptr);
   for (size_t i = 0; i < cost.samples().size(); ++i)
     problem.AddResidualBlock(new PixelResidual(cost, static_cast<int>(i)), loss.get(), pointers);
+  if (cost.priorResidualCount() > 0)
+    for (size_t g = 0; g < blocks.size(); ++g)
+      problem.AddResidualBlock(new PriorResidual(cost, static_cast<int>(g)), nullptr, pointers[g]);
   for (size_t g = 0; g < blocks.size(); ++g)
     for (size_t k = 0; k < blocks[g].size(); ++k) {
       const auto b = fitBounds(static_cast<int>(k), channels, size, cost.scale());
@@ -256,7 +276,8 @@ GroupFitResult solveWalchGd(GroupCost& cost, std::span<const model::GhostParamet
 class WholeGroupCost : public ceres::CostFunction {
  public:
   explicit WholeGroupCost(GroupCost& cost) : cost_(cost) {
-    set_num_residuals(static_cast<int>(cost.samples().size()) * cost.residualsPerSample());
+    set_num_residuals(static_cast<int>(cost.samples().size()) * cost.residualsPerSample() +
+                      cost.ghostCount() * cost.priorResidualCount());
     for (int g = 0; g < cost.ghostCount(); ++g)
       mutable_parameter_block_sizes()->push_back(cost.parametersPerGhost());
   }
@@ -272,6 +293,21 @@ class WholeGroupCost : public ceres::CostFunction {
       for (int g = 0; g < cost_.ghostCount(); ++g) {
         if (jacobians[g] == nullptr) continue;
         cost_.sampleJacobian(static_cast<int>(i), g, jacobians[g] + i * m * n);
+      }
+    }
+    // The shape prior's residuals after the pixels', each depending on its own ghost only.
+    const size_t pixels = cost_.samples().size() * m;
+    const int q = cost_.priorResidualCount();
+    std::vector<double> prior_jacobian(static_cast<size_t>(q) * n);
+    for (int g = 0; g < cost_.ghostCount(); ++g) {
+      const size_t first = pixels + static_cast<size_t>(g) * q;
+      cost_.priorResiduals(g, parameters[g], residuals + first, prior_jacobian.data());
+      if (jacobians == nullptr) continue;
+      for (int h = 0; h < cost_.ghostCount(); ++h) {
+        if (jacobians[h] == nullptr) continue;
+        double* rows = jacobians[h] + first * n;
+        if (h == g) std::copy(prior_jacobian.begin(), prior_jacobian.end(), rows);
+        else std::fill(rows, rows + static_cast<size_t>(q) * n, 0.0);
       }
     }
     return true;
