@@ -7,6 +7,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "common/image.h"
+
 namespace flarekit::fit {
 
 bool DetectionOptions::IsValid(std::string* error) const {
@@ -141,7 +143,7 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
 }
 
 cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const LightImage& light,
-                           const DetectionOptions& options) {
+                           double noise_sigma, const DetectionOptions& options) {
   cv::Mat light_image = cv::Mat::zeros(residual.size(), residual.type());
   if (!light.found) return light_image;
   // A new buffer: blurring into a header that shares `residual`'s data would blur the caller's
@@ -176,6 +178,30 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
         s[i] = std::max(0.0f, v);
       }
   }
+  // Only the light's own region: the part of {S > light_zone_sigma σ} connected to the core. Away
+  // from the light, min(R(p), R(2c − p)) is not the light but whatever is smooth there (the
+  // frame-filling veils, a ghost's symmetric part), and removing it took those ghosts away.
+  cv::Mat strong = luminance(light_image) > options.light_zone_sigma * noise_sigma;
+  cv::Mat labels;
+  const int count = cv::connectedComponents(strong, labels, 8, CV_32S);
+  std::vector<bool> keep(count, false);
+  const double reach = std::max(2.0, 2 * light.core_radius_px);
+  const cv::Rect near = cv::Rect(cvFloor(light.center.x - reach), cvFloor(light.center.y - reach),
+                                 cvCeil(2 * reach) + 1, cvCeil(2 * reach) + 1) &
+                        cv::Rect(0, 0, labels.cols, labels.rows);
+  for (int y = near.y; y < near.y + near.height; ++y)
+    for (int x = near.x; x < near.x + near.width; ++x) {
+      const int l = labels.at<int>(y, x);
+      if (l > 0) keep[l] = true;
+    }
+  cv::Mat region = cv::Mat::zeros(labels.size(), CV_8U);
+  for (int y = 0; y < labels.rows; ++y)
+    for (int x = 0; x < labels.cols; ++x)
+      if (keep[labels.at<int>(y, x)]) region.at<uchar>(y, x) = 255;
+  // The soft fringe just outside the threshold belongs to the light too.
+  cv::dilate(region, region, cv::Mat(), cv::Point(-1, -1), 3);
+  cv::Mat outside = region == 0;
+  light_image.setTo(cv::Scalar::all(0), outside);
   return light_image;
 }
 

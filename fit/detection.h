@@ -85,9 +85,11 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
 // ruled by the light) S = R̃(p); where 2c − p is outside the frame nothing is known and S = 0.
 // A ghost centred on c itself (θ ≈ 0) is symmetric too and goes into S: fitters alternate between
 // S and the ghosts (fit S from frame − ghosts, ghosts to frame − S). Returns zeros when the light
-// is not found. Same size and type as `residual`.
+// is not found. S is kept only over the light's own region: the part of S > light_zone_sigma ×
+// `noise_sigma` connected to the core (beyond it, the symmetric part is the veils'). Same size and
+// type as `residual`.
 cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const LightImage& light,
-                           const DetectionOptions& options);
+                           double noise_sigma, const DetectionOptions& options);
 
 // A candidate ghost.
 struct Detection {

@@ -393,7 +393,7 @@ class CaptureFitter {
     if (!light.found || !options_.detection.light_symmetry) return f.image;
     cv::Mat residual = f.image;
     if (!ghosts.empty()) residual = f.image - model::renderGhosts(ghosts, f.image.size(), stack_.channels);
-    const cv::Mat light_image = estimateLightImage(residual, f.valid, light, options_.detection);
+    const cv::Mat light_image = estimateLightImage(residual, f.valid, light, noiseOf(pos), options_.detection);
     return f.image - light_image;
   }
 
@@ -743,10 +743,10 @@ class CaptureFitter {
 
 cv::Mat frameWithoutLight(const Frame& frame, const DetectionOptions& options) {
   if (!options.light_symmetry) return frame.image;
-  const LightImage light = findLight(luminance(frame.image), frame.valid,
-                                     estimateNoiseSigma(frame.image, frame.valid), options);
+  const double noise_sigma = estimateNoiseSigma(frame.image, frame.valid);
+  const LightImage light = findLight(luminance(frame.image), frame.valid, noise_sigma, options);
   if (!light.found) return frame.image;
-  return frame.image - estimateLightImage(frame.image, frame.valid, light, options);
+  return frame.image - estimateLightImage(frame.image, frame.valid, light, noise_sigma, options);
 }
 
 std::vector<GhostParameters> detectSeeds(const Frame& frame, int channels, const FitOptions& options) {
