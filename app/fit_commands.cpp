@@ -64,7 +64,7 @@ void registerFit(CLI::App& app) {
     std::string out, optimizer = "ceres", degree = "2", holdout, report;
     int threads = 2;
     double edge_weight = -1, shape_prior = -1;
-    bool light_symmetry = false;
+    bool light_symmetry = true;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -81,8 +81,8 @@ void registerFit(CLI::App& app) {
   cmd->add_option("--edge-weight", o->edge_weight, "λ, the edge term's weight (default 1)");
   cmd->add_option("--shape-prior", o->shape_prior,
                   "σ of the prior that holds unseen parts of a ghost's outline at its seed, as a fraction of its size (default 1; 0 = off)");
-  cmd->add_flag("--light-symmetry", o->light_symmetry,
-                "Separate the light's own image by its point symmetry instead of keeping out of its zone (experimental)");
+  cmd->add_flag("--light-symmetry,!--no-light-symmetry", o->light_symmetry,
+                "Separate the light's own image by its point symmetry (default), or keep out of the light's zone");
   addStackOptions(cmd, o->stack);
   cmd->callback([o] {
     fit::FitOptions options;
@@ -103,7 +103,7 @@ void registerFit(CLI::App& app) {
     options.threads = o->threads;
     if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
     if (o->shape_prior >= 0) options.cost.prior_fraction = o->shape_prior;
-    if (o->light_symmetry) options.detection.light_symmetry = true;
+    options.detection.light_symmetry = o->light_symmetry;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, options.threads);

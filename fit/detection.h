@@ -39,18 +39,13 @@ struct DetectionOptions {
   int max_new_per_frame = 4;
   // Separate the light's own image by its point symmetry (estimateLightImage) instead of keeping
   // out of the whole light zone: detection then keeps out of the clipped core only (its radius ×
-  // core_margin), and ghosts beside or inside the halo and starburst are found. Off by default
-  // (`flarekit fit --light-symmetry`): it separates the light well (RMS of frame − S − true ghosts
-  // 0.5e-3 against 6e-3 at 2–6° on Heliar) but the ghosts are then found and tracked worse.
-  // Every-5th-frame 640×427 captures, 0–30°, with the shape prior: recall 15 % with it against
-  // 31.7 % without (Heliar), 5.3 % against 40.4 % (Tessar); near θ = 0 every ghost is concentric
-  // with the light and goes into S.
-  bool light_symmetry = false;
+  // core_margin), and ghosts beside or inside the halo and starburst are found. Measured on
+  // every-5th-frame 640×427 captures, 0–30° (recall / precision / median PSNR / median centroid
+  // error), against keeping out of the zone: Heliar 23.3 % / 69.5 % / 20.4 dB / 21.7 px against
+  // 31.7 % / 88.9 % / 18.3 dB / 29.8 px, Tessar 40.4 % / 81.8 % / 19.5 dB / 7.8 px against
+  // 40.4 % / 50 % / 13.6 dB / 33.3 px: without it, model ghosts drew the starburst.
+  bool light_symmetry = true;
   double core_margin = 1.5;  // (≥ 1)
-  // Fit each candidate beside the light against a light estimate that counts the candidate's seed
-  // as a ghost. Off by default: from detection seeds (rim-bright, dark inside) the estimate gets
-  // worse, not better (Heliar 0–10°: no candidate explained its blob any more).
-  bool refit_light_with_candidate = false;
   // Gaussian smoothing of the residual before the symmetric part is taken, pixels (≥ 0; 0 =
   // none). The minimum of two noisy values is biased low by 0.56 σ, which smoothing would shrink,
   // but the starburst's lines are a pixel wide: frame − S then keeps their edges. Measured on the
@@ -83,8 +78,8 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
 // with R̃ the residual smoothed by light_smoothing_px: where a ghost covers p, its mirror point
 // shows the light alone. Where 2c − p is saturated (the core's reflection: p is beside the core,
 // ruled by the light) S = R̃(p); where 2c − p is outside the frame nothing is known and S = 0.
-// A ghost centred on c itself (θ ≈ 0) is symmetric too and goes into S: fitters alternate between
-// S and the ghosts (fit S from frame − ghosts, ghosts to frame − S). Returns zeros when the light
+// A ghost centred on c itself (θ ≈ 0) is symmetric too and goes into S; the fitter's tracks and
+// shape prior carry ghosts through those frames. Returns zeros when the light
 // is not found. S is kept only over the light's own region: the part of S > light_zone_sigma ×
 // `noise_sigma` connected to the core (beyond it, the symmetric part is the veils'). Same size and
 // type as `residual`.
