@@ -14,10 +14,19 @@ namespace flarekit::model::detail {
 
 inline constexpr int kMaxSamples = 65;
 
+// Two doubles (x, y) operated on together (GCC/Clang vector extension: one SSE2 instruction for
+// both on x86-64, plain scalar code elsewhere). Each lane's arithmetic is the scalar one, so
+// results are identical bit for bit to the scalar expressions.
+typedef double Pair __attribute__((vector_size(16)));
+
 // A cubic in power form, relative to M: B(t) = a0 + a1·t + a2·t² + a3·t³ (per coordinate).
 struct PowerCubic {
   double x0, x1, x2, x3;
   double y0, y1, y2, y3;
+  // The same coefficients as (x, y) pairs for the renderer's Newton iteration, with the factors
+  // of the derivatives applied: (3·a3), (2·a2), (6·a3) are the products the scalar expressions
+  // below form first, so B, B′ and B″ from pairs equal x(t) … ddy(t) exactly. Set by finish().
+  Pair p0, p1, p2, p3, dp2, dp3, ddp3;
 
   double x(double t) const { return ((x3 * t + x2) * t + x1) * t + x0; }
   double y(double t) const { return ((y3 * t + y2) * t + y1) * t + y0; }
@@ -25,6 +34,21 @@ struct PowerCubic {
   double dy(double t) const { return (3 * y3 * t + 2 * y2) * t + y1; }
   double ddx(double t) const { return 6 * x3 * t + 2 * x2; }
   double ddy(double t) const { return 6 * y3 * t + 2 * y2; }
+
+  // (x(t), y(t)), (dx(t), dy(t)), (ddx(t), ddy(t)) from the pairs.
+  Pair point(Pair t) const { return ((p3 * t + p2) * t + p1) * t + p0; }
+  Pair tangent(Pair t) const { return (dp3 * t + dp2) * t + p1; }
+  Pair second(Pair t) const { return ddp3 * t + dp2; }
+
+  void finish() {
+    p0 = Pair{x0, y0};
+    p1 = Pair{x1, y1};
+    p2 = Pair{x2, y2};
+    p3 = Pair{x3, y3};
+    dp2 = Pair{2 * x2, 2 * y2};
+    dp3 = Pair{3 * x3, 3 * y3};
+    ddp3 = Pair{6 * x3, 6 * y3};
+  }
 };
 
 inline PowerCubic toPowerForm(const CubicBezier& b, cv::Point2d origin) {
@@ -39,6 +63,7 @@ inline PowerCubic toPowerForm(const CubicBezier& b, cv::Point2d origin) {
   c.y1 = 3 * (p1.y - p0.y);
   c.y2 = 3 * (p2.y - 2 * p1.y + p0.y);
   c.y3 = p3.y - 3 * p2.y + 3 * p1.y - p0.y;
+  c.finish();
   return c;
 }
 
@@ -468,15 +493,19 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   double t = std::clamp(c.t, 0.0, 1.0);
   int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
   bool converged = false;
+  const Pair p = {px, py};
+  const double speed2_floor = 1e-12 * s.size2;
   for (int i = 0; i < 12; ++i) {
     const PowerCubic& seg = s.seg[w];
-    const double bx = seg.x(t) - px, by = seg.y(t) - py;
-    const double dx = seg.dx(t), dy = seg.dy(t);
-    const double f = bx * dx + by * dy;
-    const double speed2 = dx * dx + dy * dy;
-    const double fp = speed2 + bx * seg.ddx(t) + by * seg.ddy(t);
+    // x, y and their derivatives as pairs (the same bits as seg.x(t) - px, seg.dx(t), …).
+    const Pair tt = {t, t};
+    const Pair b = seg.point(tt) - p, d = seg.tangent(tt);
+    const Pair bd = b * d, dd = d * d, bdd = b * seg.second(tt);
+    const double f = bd[0] + bd[1];
+    const double speed2 = dd[0] + dd[1];
+    const double fp = speed2 + bdd[0] + bdd[1];
     // Not in the basin of a minimum, or B′ ≈ 0 (a corner of a Cl = 0 or Cr = 0 outline).
-    if (!(fp > 0) || !(speed2 > 1e-12 * s.size2)) return Certificate::kNotConverged;
+    if (!(fp > 0) || !(speed2 > speed2_floor)) return Certificate::kNotConverged;
     double next = t - f / fp;
     if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
       w = 0;
@@ -510,10 +539,12 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   }
   if (!converged) return Certificate::kNotConverged;
   const PowerCubic& seg = s.seg[w];
-  const double vx = px - seg.x(t), vy = py - seg.y(t);
-  const double d2 = vx * vx + vy * vy;
+  const Pair tt = {t, t};
+  const Pair v = p - seg.point(tt), tangent = seg.tangent(tt), vv = v * v;
+  const double vx = v[0], vy = v[1];
+  const double d2 = vv[0] + vv[1];
   const double d = std::sqrt(d2);
-  const double tx = seg.dx(t), ty = seg.dy(t);
+  const double tx = tangent[0], ty = tangent[1];
   c = {w, t, d2};
   if (d < 1e-7) {  // on the outline: any sign is within 1e-7 px, take the exact one
     inside = insideRelative(s, px, py);
@@ -522,7 +553,7 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   // Outward unit normal: the tangent turned by −90° (the outline runs clockwise as displayed, y
   // down).
   const double speed2 = tx * tx + ty * ty;
-  if (!(speed2 > 1e-12 * s.size2)) return Certificate::kUnproven;
+  if (!(speed2 > speed2_floor)) return Certificate::kUnproven;
   const double inv_speed = 1 / std::sqrt(speed2);
   const double nx = ty * inv_speed, ny = -tx * inv_speed;
   const double vn = vx * nx + vy * ny;
