@@ -102,6 +102,7 @@ struct PreparedShape {
   double mx = 0, my = 0;    // M
   double left = 0, right = 0, height = 0;
   double size2 = 0;  // (L + R + h)²: the scale of B′², pixels²
+  double speed2_floor = 0;  // 1e-12·size2: B′² below this counts as B′ = 0 (a corner)
   std::array<PowerCubic, 2> seg{};
   std::array<int, 2> samples{};  // samples per segment
   std::array<std::array<double, kMaxSamples>, 2> sample_t{}, sample_x{}, sample_y{};
@@ -130,6 +131,7 @@ struct PreparedShape {
     right = g.right;
     height = g.height;
     size2 = (left + right + height) * (left + right + height);
+    speed2_floor = 1e-12 * size2;
     const auto outline = ghostOutline(g);
     const cv::Point2d m(mx, my);
     seg[0] = toPowerForm(outline[0], m);
@@ -494,7 +496,7 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
   bool converged = false;
   const Pair p = {px, py};
-  const double speed2_floor = 1e-12 * s.size2;
+  const double speed2_floor = s.speed2_floor;
   for (int i = 0; i < 12; ++i) {
     const PowerCubic& seg = s.seg[w];
     // x, y and their derivatives as pairs (the same bits as seg.x(t) - px, seg.dx(t), …).
@@ -507,17 +509,17 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
     // Not in the basin of a minimum, or B′ ≈ 0 (a corner of a Cl = 0 or Cr = 0 outline).
     if (!(fp > 0) || !(speed2 > speed2_floor)) return Certificate::kNotConverged;
     double next = t - f / fp;
-    if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
-      w = 0;
-      t = 1;
-      continue;
-    }
-    if (next > 1 && w == 0) {
-      w = 1;
-      t = 0;
-      continue;
-    }
-    if (next < 0 || next > 1) {
+    if (next < 0 || next > 1) {  // (one test on the common path, inside the segment)
+      if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
+        w = 0;
+        t = 1;
+        continue;
+      }
+      if (next > 1 && w == 0) {
+        w = 1;
+        t = 0;
+        continue;
+      }
       next = std::clamp(next, 0.0, 1.0);
       if (++clamped >= 2 && next == t) {
         converged = true;  // the minimum is at the end: the certificate decides
