@@ -198,11 +198,15 @@ struct PreparedShape {
 // bisection on the sign of f otherwise. Returns t; d2 receives g·2 there.
 inline double refineNearest(const PowerCubic& c, double px, double py, double lo, double hi, double t,
                             int newton_steps, double& d2) {
+  const Pair p = {px, py};
   for (int i = 0; i < newton_steps; ++i) {
-    const double bx = c.x(t) - px, by = c.y(t) - py;
-    const double dx = c.dx(t), dy = c.dy(t);
-    const double f = bx * dx + by * dy;
-    const double fp = dx * dx + dy * dy + bx * c.ddx(t) + by * c.ddy(t);
+    // As pairs: the same bits as c.x(t) - px, c.dx(t), … (see PowerCubic).
+    const Pair tt = {t, t};
+    const Pair b = c.point(tt) - p, d = c.tangent(tt);
+    const Pair bd = b * d, dd = d * d, bdd = b * c.second(tt);
+    const double f = bd[0] + bd[1];
+    const double speed2 = dd[0] + dd[1];
+    const double fp = speed2 + bdd[0] + bdd[1];
     if (f > 0)
       hi = t;
     else if (f < 0)
@@ -216,11 +220,12 @@ inline double refineNearest(const PowerCubic& c, double px, double py, double lo
     t = next;
     // A Newton step that moves the point by less than 1e-5 px leaves an error of the order of
     // its square (quadratic convergence): done.
-    if (newton && moved * moved * (dx * dx + dy * dy) < 1e-10) break;
+    if (newton && moved * moved * speed2 < 1e-10) break;
     if (std::abs(moved) < 1e-15) break;
   }
-  const double bx = c.x(t) - px, by = c.y(t) - py;
-  d2 = bx * bx + by * by;
+  const Pair tt = {t, t};
+  const Pair b = c.point(tt) - p, bb = b * b;
+  d2 = bb[0] + bb[1];
   return t;
 }
 
@@ -284,16 +289,22 @@ inline void splitPiece(const PowerCubic& c, int which, double px, double py,
                                          double curvature_radius, int depth, int newton_steps,
                                          double cutoff2, Candidate& best) {
   constexpr int kParts = 4;
-  double ts[kParts + 1], slopes[kParts + 1];
+  // The points and tangents at the part ends, each evaluated once (neighbouring parts share an
+  // end).
+  double ts[kParts + 1], slopes[kParts + 1], x[kParts + 1], y[kParts + 1], dx[kParts + 1], dy[kParts + 1];
   for (int i = 0; i <= kParts; ++i) {
     ts[i] = a + (b - a) * i / kParts;
+    const double t = ts[i];
+    x[i] = c.x(t);
+    y[i] = c.y(t);
+    dx[i] = c.dx(t);
+    dy[i] = c.dy(t);
     if (i == 0) {
       slopes[i] = slope_a;
     } else if (i == kParts) {
       slopes[i] = slope_b;
     } else {
-      const double t = ts[i];
-      const double bx = c.x(t) - px, by = c.y(t) - py;
+      const double bx = x[i] - px, by = y[i] - py;
       const double d2 = bx * bx + by * by;
       if (d2 < best.d2) best = {which, t, d2};
       const cv::Point2d dir = tangentDirection(c, t);
@@ -302,8 +313,8 @@ inline void splitPiece(const PowerCubic& c, int which, double px, double py,
   }
   for (int i = 0; i < kParts; ++i) {
     const double u = ts[i], v = ts[i + 1], third = (v - u) / 3;
-    const double xs[4] = {c.x(u), c.x(u) + third * c.dx(u), c.x(v) - third * c.dx(v), c.x(v)};
-    const double ys[4] = {c.y(u), c.y(u) + third * c.dy(u), c.y(v) - third * c.dy(v), c.y(v)};
+    const double xs[4] = {x[i], x[i] + third * dx[i], x[i + 1] - third * dx[i + 1], x[i + 1]};
+    const double ys[4] = {y[i], y[i] + third * dy[i], y[i + 1] - third * dy[i + 1], y[i + 1]};
     searchPiece(c, which, px, py, u, v, slopes[i], slopes[i + 1],
                 std::min({xs[0], xs[1], xs[2], xs[3]}), std::max({xs[0], xs[1], xs[2], xs[3]}),
                 std::min({ys[0], ys[1], ys[2], ys[3]}), std::max({ys[0], ys[1], ys[2], ys[3]}),
