@@ -387,10 +387,16 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec, unused, has_unused)) {
               centre_nearest = {ec.segment, ec.t, ec.d * ec.d};
               has_centre_nearest = true;
+            } else if (fast && detail::depthLowerBound(pg.shape, qc.x - pg.shape.mx, -std::abs(qc.y - pg.shape.my)) >=
+                                   g.inside_falloff + reach + 1e-7) {
+              // Deep inside (where the certificate's rolling disc is too small): the sample
+              // polygon proves the whole block deeper than Fi, as the full search below would
+              // (its distance is never below the true one); 1e-7 px covers rounding.
+              mode = 1;
             } else {
               evalDistance(pg.shape, qc, dopt, ec, g.inside_falloff + reach, g.outside_falloff + reach);
             }
-            if (ec.d + reach <= -g.inside_falloff) mode = 1;
+            if (mode == 1 || ec.d + reach <= -g.inside_falloff) mode = 1;
             else if (ec.d - reach >= g.outside_falloff) mode = 2;
           }
           if (mode == 2) continue;
