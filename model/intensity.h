@@ -17,6 +17,7 @@
 
 #include <cmath>
 
+#include "model/detail/transfer_math.h"
 #include "model/ghost_shape.h"
 
 namespace flarekit::model {
@@ -39,8 +40,10 @@ struct TransferWeights {
 // per-point evaluation) gives the same bits.
 inline double transferPower(double tau, double exponent) {
   // exp(E·ln τ) rather than std::pow: about 40 % fewer instructions with glibc, same accuracy
-  // for τ in (0, 1) and E in [0.1, 10] (a few ulp).
-  return tau >= 1 ? 1.0 : (tau > 0 ? std::exp(exponent * std::log(tau)) : 0.0);
+  // for τ in (0, 1) and E in [0.1, 10] (a few ulp). The inline exp and log (detail/
+  // transfer_math.h) agree with glibc's to 1–2 ulp and save the calls into libm, about a quarter
+  // of a fall-off pixel's instructions besides the distance.
+  return tau >= 1 ? 1.0 : (tau > 0 ? detail::transferExp(exponent * detail::transferLog(tau)) : 0.0);
 }
 
 // The value weights only (border, inside) at signed distance `d`: what transferWeights returns

@@ -345,18 +345,21 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
     int x[3] = {0, 0, 0};
   };
 
-  auto renderTile = [&](int tile_index) {
+  // Compiled for each combination of derivative images (with or without: without, every
+  // derivative branch and the nearest point's coordinates, which only derivatives read, fold
+  // away) and channel count (1 or 3: the per-channel loops unroll).
+  auto renderTile = [&]<bool kDerivatives, int kChannels>(int tile_index) {
     std::vector<RowHistory> histories;
     const int tx = tile_index % tiles_x, ty = tile_index / tiles_x;
     const cv::Rect tile_rect(roi.x + tx * tile, roi.y + ty * tile, tile, tile);
     double values[3];
-    std::vector<double> jac(static_cast<size_t>(channels) * parameterCount(channels));
+    std::vector<double> jac(static_cast<size_t>(kChannels) * parameterCount(kChannels));
     for (int k : tile_ghosts[tile_index]) {
       const PreparedGhost& pg = prepared[k];
       const GhostParameters& g = *pg.g;
       const cv::Rect region = pg.bounds & tile_rect;
       if (region.area() <= 0) continue;
-      GhostDerivativeImages* deriv = derivatives ? &(*derivatives)[ghost_index[k]] : nullptr;
+      GhostDerivativeImages* deriv = kDerivatives ? &(*derivatives)[ghost_index[k]] : nullptr;
       const int n = pg.count;
       const float inside_value[3] = {static_cast<float>(g.inside[0]), static_cast<float>(g.inside[1]),
                                      static_cast<float>(g.inside[2])};
@@ -384,24 +387,30 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec, unused, has_unused)) {
               centre_nearest = {ec.segment, ec.t, ec.d * ec.d};
               has_centre_nearest = true;
+            } else if (fast && detail::depthLowerBound(pg.shape, qc.x - pg.shape.mx, -std::abs(qc.y - pg.shape.my)) >=
+                                   g.inside_falloff + reach + 1e-7) {
+              // Deep inside (where the certificate's rolling disc is too small): the sample
+              // polygon proves the whole block deeper than Fi, as the full search below would
+              // (its distance is never below the true one); 1e-7 px covers rounding.
+              mode = 1;
             } else {
               evalDistance(pg.shape, qc, dopt, ec, g.inside_falloff + reach, g.outside_falloff + reach);
             }
-            if (ec.d + reach <= -g.inside_falloff) mode = 1;
+            if (mode == 1 || ec.d + reach <= -g.inside_falloff) mode = 1;
             else if (ec.d - reach >= g.outside_falloff) mode = 2;
           }
           if (mode == 2) continue;
           if (mode == 1) {  // the whole block is deeper than Fi: the constant Ii (vectorizable)
-            const ParameterLayout layout{channels};
+            const ParameterLayout layout{kChannels};
             for (int y = by; y < by + bh; ++y) {
-              float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
+              float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * kChannels;
               for (int i = 0; i < bw; ++i)
-                for (int c = 0; c < channels; ++c) out[i * channels + c] += inside_value[c];
+                for (int c = 0; c < kChannels; ++c) out[i * kChannels + c] += inside_value[c];
               if (deriv)
-                for (int c = 0; c < channels; ++c) {
+                for (int c = 0; c < kChannels; ++c) {
                   float* d = deriv->images[layout.ii(c)].ptr<float>(y - deriv->rect.y) +
-                             static_cast<size_t>(bx - deriv->rect.x) * channels + c;
-                  for (int i = 0; i < bw; ++i) d[i * channels] = 1.0f;
+                             static_cast<size_t>(bx - deriv->rect.x) * kChannels + c;
+                  for (int i = 0; i < bw; ++i) d[i * kChannels] = 1.0f;
                 }
             }
             continue;
@@ -422,7 +431,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
           detail::Candidate row_start = centre_nearest;  // the previous row's first pixel
           bool has_row_start = has_centre_nearest;
           for (int y = by; y < by + bh; ++y) {
-            float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * channels;
+            float* out = image.ptr<float>(y - roi.y) + static_cast<size_t>(bx - roi.x) * kChannels;
             detail::Candidate hint = row_start;  // the previous pixel's nearest point (coherence)
             bool has_hint = has_row_start;
             RowHistory& history = histories[static_cast<size_t>(y - by)];
@@ -437,7 +446,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             double last_d = 0;  // the last exact distance in this row, at x = last_x
             int last_x = 0;
             bool has_last = false;
-            for (int x = bx; x < bx + bw; ++x, out += channels) {
+            for (int x = bx; x < bx + bw; ++x, out += kChannels) {
               const cv::Point2d p(x + 0.5, y + 0.5);
               int pixel_mode = mode;
               if (mode == 0 && bw * bh > 1) {
@@ -453,11 +462,11 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 }
               }
               if (pixel_mode == 1) {
-                for (int c = 0; c < channels; ++c) out[c] += inside_value[c];
+                for (int c = 0; c < kChannels; ++c) out[c] += inside_value[c];
                 if (deriv) {
-                  const ParameterLayout layout{channels};
-                  for (int c = 0; c < channels; ++c)
-                    deriv->images[layout.ii(c)].ptr<float>(y - deriv->rect.y)[(x - deriv->rect.x) * channels + c] = 1.0f;
+                  const ParameterLayout layout{kChannels};
+                  for (int c = 0; c < kChannels; ++c)
+                    deriv->images[layout.ii(c)].ptr<float>(y - deriv->rect.y)[(x - deriv->rect.x) * kChannels + c] = 1.0f;
                 }
                 continue;
               }
@@ -518,14 +527,14 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               } else {  // the value alone, inline (what shadeGhost computes without a Jacobian)
                 double border = 0, inside = 0;
                 transferValueWeights(e.d, g, border, inside);
-                for (int c = 0; c < channels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
+                for (int c = 0; c < kChannels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
               }
-              for (int c = 0; c < channels; ++c) out[c] += static_cast<float>(values[c]);
+              for (int c = 0; c < kChannels; ++c) out[c] += static_cast<float>(values[c]);
               if (deriv) {
-                const size_t offset = static_cast<size_t>(x - deriv->rect.x) * channels;
+                const size_t offset = static_cast<size_t>(x - deriv->rect.x) * kChannels;
                 for (int kk = 0; kk < n; ++kk) {
                   float* d = deriv->images[kk].ptr<float>(y - deriv->rect.y) + offset;
-                  for (int c = 0; c < channels; ++c) d[c] = static_cast<float>(jac[c * n + kk]);
+                  for (int c = 0; c < kChannels; ++c) d[c] = static_cast<float>(jac[c * n + kk]);
                 }
               }
             }
@@ -536,12 +545,19 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
   };
 
   const int tile_count = tiles_x * tiles_y;
+  auto renderTiles = [&](int begin, int end) {
+    for (int i = begin; i != end; ++i) {
+      if (derivatives)
+        channels == 1 ? renderTile.template operator()<true, 1>(i) : renderTile.template operator()<true, 3>(i);
+      else
+        channels == 1 ? renderTile.template operator()<false, 1>(i) : renderTile.template operator()<false, 3>(i);
+    }
+  };
   if (options.parallel && tile_count > 1) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, tile_count, 1), [&](const tbb::blocked_range<int>& r) {
-      for (int i = r.begin(); i != r.end(); ++i) renderTile(i);
-    });
+    tbb::parallel_for(tbb::blocked_range<int>(0, tile_count, 1),
+                      [&](const tbb::blocked_range<int>& r) { renderTiles(r.begin(), r.end()); });
   } else {
-    for (int i = 0; i < tile_count; ++i) renderTile(i);
+    renderTiles(0, tile_count);
   }
 }
 

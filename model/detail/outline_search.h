@@ -14,10 +14,19 @@ namespace flarekit::model::detail {
 
 inline constexpr int kMaxSamples = 65;
 
+// Two doubles (x, y) operated on together (GCC/Clang vector extension: one SSE2 instruction for
+// both on x86-64, plain scalar code elsewhere). Each lane's arithmetic is the scalar one, so
+// results are identical bit for bit to the scalar expressions.
+typedef double Pair __attribute__((vector_size(16)));
+
 // A cubic in power form, relative to M: B(t) = a0 + a1·t + a2·t² + a3·t³ (per coordinate).
 struct PowerCubic {
   double x0, x1, x2, x3;
   double y0, y1, y2, y3;
+  // The same coefficients as (x, y) pairs for the renderer's Newton iteration, with the factors
+  // of the derivatives applied: (3·a3), (2·a2), (6·a3) are the products the scalar expressions
+  // below form first, so B, B′ and B″ from pairs equal x(t) … ddy(t) exactly. Set by finish().
+  Pair p0, p1, p2, p3, dp2, dp3, ddp3;
 
   double x(double t) const { return ((x3 * t + x2) * t + x1) * t + x0; }
   double y(double t) const { return ((y3 * t + y2) * t + y1) * t + y0; }
@@ -25,6 +34,21 @@ struct PowerCubic {
   double dy(double t) const { return (3 * y3 * t + 2 * y2) * t + y1; }
   double ddx(double t) const { return 6 * x3 * t + 2 * x2; }
   double ddy(double t) const { return 6 * y3 * t + 2 * y2; }
+
+  // (x(t), y(t)), (dx(t), dy(t)), (ddx(t), ddy(t)) from the pairs.
+  Pair point(Pair t) const { return ((p3 * t + p2) * t + p1) * t + p0; }
+  Pair tangent(Pair t) const { return (dp3 * t + dp2) * t + p1; }
+  Pair second(Pair t) const { return ddp3 * t + dp2; }
+
+  void finish() {
+    p0 = Pair{x0, y0};
+    p1 = Pair{x1, y1};
+    p2 = Pair{x2, y2};
+    p3 = Pair{x3, y3};
+    dp2 = Pair{2 * x2, 2 * y2};
+    dp3 = Pair{3 * x3, 3 * y3};
+    ddp3 = Pair{6 * x3, 6 * y3};
+  }
 };
 
 inline PowerCubic toPowerForm(const CubicBezier& b, cv::Point2d origin) {
@@ -39,6 +63,7 @@ inline PowerCubic toPowerForm(const CubicBezier& b, cv::Point2d origin) {
   c.y1 = 3 * (p1.y - p0.y);
   c.y2 = 3 * (p2.y - 2 * p1.y + p0.y);
   c.y3 = p3.y - 3 * p2.y + 3 * p1.y - p0.y;
+  c.finish();
   return c;
 }
 
@@ -77,6 +102,7 @@ struct PreparedShape {
   double mx = 0, my = 0;    // M
   double left = 0, right = 0, height = 0;
   double size2 = 0;  // (L + R + h)²: the scale of B′², pixels²
+  double speed2_floor = 0;  // 1e-12·size2: B′² below this counts as B′ = 0 (a corner)
   std::array<PowerCubic, 2> seg{};
   std::array<int, 2> samples{};  // samples per segment
   std::array<std::array<double, kMaxSamples>, 2> sample_t{}, sample_x{}, sample_y{};
@@ -96,6 +122,10 @@ struct PreparedShape {
   // from inside at any outline point lies inside the ghost: what certifies inside distances in
   // certifiedNearest().
   double min_curvature_radius = 0;
+  // The edges of the sample polygon (consecutive samples of each segment): outward unit normal n
+  // and offset c = n·(sample), so that c − n·p is p's distance below the edge's line. The samples
+  // lie on the convex outline, so their polygon lies inside the ghost (see depthLowerBound).
+  std::array<std::array<double, kMaxSamples>, 2> edge_nx{}, edge_ny{}, edge_c{};
 
   PreparedShape() = default;
   PreparedShape(const GhostParameters& g, int samples_per_segment, double max_turn_deg = 10) {
@@ -105,6 +135,7 @@ struct PreparedShape {
     right = g.right;
     height = g.height;
     size2 = (left + right + height) * (left + right + height);
+    speed2_floor = 1e-12 * size2;
     const auto outline = ghostOutline(g);
     const cv::Point2d m(mx, my);
     seg[0] = toPowerForm(outline[0], m);
@@ -163,6 +194,16 @@ struct PreparedShape {
       for (int k = 0; k + 1 < samples[s]; ++k)
         min_curvature_radius = std::min(min_curvature_radius, curvature_radius[s][k]);
     if (!(smallest_curvature > 1e-6) || !(min_curvature_radius < 1e300)) min_curvature_radius = 0;
+    for (int w = 0; w < 2; ++w)
+      for (int k = 0; k + 1 < samples[w]; ++k) {
+        const double ex = sample_x[w][k + 1] - sample_x[w][k], ey = sample_y[w][k + 1] - sample_y[w][k];
+        const double len = std::sqrt(ex * ex + ey * ey);
+        // Outward: the edge direction turned by −90° (clockwise outline as displayed, y down); a
+        // degenerate edge bounds nothing.
+        edge_nx[w][k] = len > 0 ? ey / len : 0;
+        edge_ny[w][k] = len > 0 ? -ex / len : 0;
+        edge_c[w][k] = len > 0 ? edge_nx[w][k] * sample_x[w][k] + edge_ny[w][k] * sample_y[w][k] : 1e308;
+      }
   }
 };
 
@@ -171,11 +212,15 @@ struct PreparedShape {
 // bisection on the sign of f otherwise. Returns t; d2 receives g·2 there.
 inline double refineNearest(const PowerCubic& c, double px, double py, double lo, double hi, double t,
                             int newton_steps, double& d2) {
+  const Pair p = {px, py};
   for (int i = 0; i < newton_steps; ++i) {
-    const double bx = c.x(t) - px, by = c.y(t) - py;
-    const double dx = c.dx(t), dy = c.dy(t);
-    const double f = bx * dx + by * dy;
-    const double fp = dx * dx + dy * dy + bx * c.ddx(t) + by * c.ddy(t);
+    // As pairs: the same bits as c.x(t) - px, c.dx(t), … (see PowerCubic).
+    const Pair tt = {t, t};
+    const Pair b = c.point(tt) - p, d = c.tangent(tt);
+    const Pair bd = b * d, dd = d * d, bdd = b * c.second(tt);
+    const double f = bd[0] + bd[1];
+    const double speed2 = dd[0] + dd[1];
+    const double fp = speed2 + bdd[0] + bdd[1];
     if (f > 0)
       hi = t;
     else if (f < 0)
@@ -189,11 +234,12 @@ inline double refineNearest(const PowerCubic& c, double px, double py, double lo
     t = next;
     // A Newton step that moves the point by less than 1e-5 px leaves an error of the order of
     // its square (quadratic convergence): done.
-    if (newton && moved * moved * (dx * dx + dy * dy) < 1e-10) break;
+    if (newton && moved * moved * speed2 < 1e-10) break;
     if (std::abs(moved) < 1e-15) break;
   }
-  const double bx = c.x(t) - px, by = c.y(t) - py;
-  d2 = bx * bx + by * by;
+  const Pair tt = {t, t};
+  const Pair b = c.point(tt) - p, bb = b * b;
+  d2 = bb[0] + bb[1];
   return t;
 }
 
@@ -257,16 +303,22 @@ inline void splitPiece(const PowerCubic& c, int which, double px, double py,
                                          double curvature_radius, int depth, int newton_steps,
                                          double cutoff2, Candidate& best) {
   constexpr int kParts = 4;
-  double ts[kParts + 1], slopes[kParts + 1];
+  // The points and tangents at the part ends, each evaluated once (neighbouring parts share an
+  // end).
+  double ts[kParts + 1], slopes[kParts + 1], x[kParts + 1], y[kParts + 1], dx[kParts + 1], dy[kParts + 1];
   for (int i = 0; i <= kParts; ++i) {
     ts[i] = a + (b - a) * i / kParts;
+    const double t = ts[i];
+    x[i] = c.x(t);
+    y[i] = c.y(t);
+    dx[i] = c.dx(t);
+    dy[i] = c.dy(t);
     if (i == 0) {
       slopes[i] = slope_a;
     } else if (i == kParts) {
       slopes[i] = slope_b;
     } else {
-      const double t = ts[i];
-      const double bx = c.x(t) - px, by = c.y(t) - py;
+      const double bx = x[i] - px, by = y[i] - py;
       const double d2 = bx * bx + by * by;
       if (d2 < best.d2) best = {which, t, d2};
       const cv::Point2d dir = tangentDirection(c, t);
@@ -275,8 +327,8 @@ inline void splitPiece(const PowerCubic& c, int which, double px, double py,
   }
   for (int i = 0; i < kParts; ++i) {
     const double u = ts[i], v = ts[i + 1], third = (v - u) / 3;
-    const double xs[4] = {c.x(u), c.x(u) + third * c.dx(u), c.x(v) - third * c.dx(v), c.x(v)};
-    const double ys[4] = {c.y(u), c.y(u) + third * c.dy(u), c.y(v) - third * c.dy(v), c.y(v)};
+    const double xs[4] = {x[i], x[i] + third * dx[i], x[i + 1] - third * dx[i + 1], x[i + 1]};
+    const double ys[4] = {y[i], y[i] + third * dy[i], y[i + 1] - third * dy[i + 1], y[i + 1]};
     searchPiece(c, which, px, py, u, v, slopes[i], slopes[i + 1],
                 std::min({xs[0], xs[1], xs[2], xs[3]}), std::max({xs[0], xs[1], xs[2], xs[3]}),
                 std::min({ys[0], ys[1], ys[2], ys[3]}), std::max({ys[0], ys[1], ys[2], ys[3]}),
@@ -468,27 +520,31 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   double t = std::clamp(c.t, 0.0, 1.0);
   int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
   bool converged = false;
+  const Pair p = {px, py};
+  const double speed2_floor = s.speed2_floor;
   for (int i = 0; i < 12; ++i) {
     const PowerCubic& seg = s.seg[w];
-    const double bx = seg.x(t) - px, by = seg.y(t) - py;
-    const double dx = seg.dx(t), dy = seg.dy(t);
-    const double f = bx * dx + by * dy;
-    const double speed2 = dx * dx + dy * dy;
-    const double fp = speed2 + bx * seg.ddx(t) + by * seg.ddy(t);
+    // x, y and their derivatives as pairs (the same bits as seg.x(t) - px, seg.dx(t), …).
+    const Pair tt = {t, t};
+    const Pair b = seg.point(tt) - p, d = seg.tangent(tt);
+    const Pair bd = b * d, dd = d * d, bdd = b * seg.second(tt);
+    const double f = bd[0] + bd[1];
+    const double speed2 = dd[0] + dd[1];
+    const double fp = speed2 + bdd[0] + bdd[1];
     // Not in the basin of a minimum, or B′ ≈ 0 (a corner of a Cl = 0 or Cr = 0 outline).
-    if (!(fp > 0) || !(speed2 > 1e-12 * s.size2)) return Certificate::kNotConverged;
+    if (!(fp > 0) || !(speed2 > speed2_floor)) return Certificate::kNotConverged;
     double next = t - f / fp;
-    if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
-      w = 0;
-      t = 1;
-      continue;
-    }
-    if (next > 1 && w == 0) {
-      w = 1;
-      t = 0;
-      continue;
-    }
-    if (next < 0 || next > 1) {
+    if (next < 0 || next > 1) {  // (one test on the common path, inside the segment)
+      if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
+        w = 0;
+        t = 1;
+        continue;
+      }
+      if (next > 1 && w == 0) {
+        w = 1;
+        t = 0;
+        continue;
+      }
       next = std::clamp(next, 0.0, 1.0);
       if (++clamped >= 2 && next == t) {
         converged = true;  // the minimum is at the end: the certificate decides
@@ -510,10 +566,12 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   }
   if (!converged) return Certificate::kNotConverged;
   const PowerCubic& seg = s.seg[w];
-  const double vx = px - seg.x(t), vy = py - seg.y(t);
-  const double d2 = vx * vx + vy * vy;
+  const Pair tt = {t, t};
+  const Pair v = p - seg.point(tt), tangent = seg.tangent(tt), vv = v * v;
+  const double vx = v[0], vy = v[1];
+  const double d2 = vv[0] + vv[1];
   const double d = std::sqrt(d2);
-  const double tx = seg.dx(t), ty = seg.dy(t);
+  const double tx = tangent[0], ty = tangent[1];
   c = {w, t, d2};
   if (d < 1e-7) {  // on the outline: any sign is within 1e-7 px, take the exact one
     inside = insideRelative(s, px, py);
@@ -522,7 +580,7 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   // Outward unit normal: the tangent turned by −90° (the outline runs clockwise as displayed, y
   // down).
   const double speed2 = tx * tx + ty * ty;
-  if (!(speed2 > 1e-12 * s.size2)) return Certificate::kUnproven;
+  if (!(speed2 > speed2_floor)) return Certificate::kUnproven;
   const double inv_speed = 1 / std::sqrt(speed2);
   const double nx = ty * inv_speed, ny = -tx * inv_speed;
   const double vn = vx * nx + vy * ny;
@@ -536,6 +594,26 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   const double lower = rho - std::sqrt(cx * cx + cy * cy);
   inside = true;
   return d - lower <= kDistanceTolerance ? Certificate::kCertified : Certificate::kUnproven;
+}
+
+// A lower bound of the depth of the reflected relative point (px, py ≤ 0) below the outline
+// (positive inside; ≤ 0 means no bound). The polygon of the samples and their mirror images lies
+// inside the ghost (the outline is convex, 0 ≤ Cl, Cr ≤ 1), so p's distance to the outline is at
+// least its distance to the polygon's boundary, the smallest c − n·p over its edges; in the upper
+// half the mirrored edges are never nearer than the edges they mirror (their normals point up,
+// ny ≤ 0, so c − n·p' ≥ c − n·p for p' = (px, −py)). Accurate to rounding (~1e-13 px); the
+// polygon's chords lie within their sagitta (< 0.4 % of the radius of curvature at ≤ 10° of turn
+// per piece) of the outline.
+inline double depthLowerBound(const PreparedShape& s, double px, double py) {
+  double depth = 1e308;
+  for (int w = 0; w < 2; ++w) {
+    const int n = s.samples[w] - 1;
+    const double* nx = s.edge_nx[w].data();
+    const double* ny = s.edge_ny[w].data();
+    const double* c = s.edge_c[w].data();
+    for (int k = 0; k < n; ++k) depth = std::min(depth, c[k] - (nx[k] * px + ny[k] * py));
+  }
+  return depth;
 }
 
 // A starting point for certifiedNearest without a previous pixel: the outline point at the same
