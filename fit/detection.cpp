@@ -205,6 +205,17 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
   return light_image;
 }
 
+double flareAxisOffset(cv::Point2d point, const LightImage& light, cv::Size size) {
+  const cv::Point2d center(size.width / 2.0, size.height / 2.0);
+  cv::Point2d dir(1, 0);
+  if (light.found && cv::norm(light.center - center) > 0.05 * size.width) {
+    dir = light.center - center;
+    dir /= cv::norm(dir);
+  }
+  const cv::Point2d d = point - center;
+  return std::abs(d.x * dir.y - d.y * dir.x);
+}
+
 std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& valid,
                                     double noise_sigma, const LightImage& light,
                                     const DetectionOptions& options) {
@@ -219,17 +230,8 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
                cvRound(options.light_symmetry ? light.core_radius_px * options.core_margin
                                               : light.zone_radius_px),
                cv::Scalar(0), cv::FILLED);
-  // The axis: through the light and the image centre (horizontal for a pan rig without roll).
   const cv::Point2d center(W / 2.0, H / 2.0);
-  cv::Point2d dir(1, 0);
-  if (light.found && cv::norm(light.center - center) > 0.05 * W) {
-    dir = light.center - center;
-    dir /= cv::norm(dir);
-  }
-  auto axisOffset = [&](cv::Point2d p) {
-    const cv::Point2d d = p - center;
-    return std::abs(d.x * dir.y - d.y * dir.x);
-  };
+  auto axisOffset = [&](cv::Point2d p) { return flareAxisOffset(p, light, residual.size()); };
 
   std::vector<Detection> found;
   cv::Mat claimed = cv::Mat::zeros(residual.size(), CV_8U);  // blobs already taken at a higher level

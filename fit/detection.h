@@ -62,7 +62,21 @@ struct LightImage {
   cv::Point2d center;        // image pixels
   double zone_radius_px = 0; // core + halo + starburst: detection keeps out of this disc
   double core_radius_px = 0; // the clipped core (radius of a disc of its area)
+
+  // The same light on a level of k×k pixel averages (positions and radii divided by k).
+  LightImage atLevel(int factor) const {
+    LightImage l = *this;
+    l.center /= factor;
+    l.zone_radius_px /= factor;
+    l.core_radius_px /= factor;
+    return l;
+  }
 };
+
+// Distance of `point` from the flare axis of an image of `size`: the line through the light's
+// image and the image centre (Walch et al. 2018 §3.2: ghosts are mirror-symmetric about it),
+// horizontal when the light is outside the frame or within 5 % of the width from the centre.
+double flareAxisOffset(cv::Point2d point, const LightImage& light, cv::Size size);
 
 // Finds the light: the centroid of the largest saturated (or brightest) blob; its zone from the
 // azimuthal median profile around it. `valid` is the frame's mask (0 = saturated / non-finite).

@@ -361,20 +361,8 @@ class CaptureFitter {
     return lights_[pos] = findLight(lum, f.valid, noiseOf(pos), options_.detection);
   }
 
-  // Distance of a point (capture pixels) from the flare axis of a frame: the line through the
-  // light's image and the image centre, horizontal when the light is outside the frame or at the
-  // centre (detection.cpp uses the same rule).
-  double axisOffset(int pos, cv::Point2d p) {
-    const cv::Point2d center(stack_.size.width / 2.0, stack_.size.height / 2.0);
-    cv::Point2d dir(1, 0);
-    const LightImage& light = lightOf(pos);
-    if (light.found && cv::norm(light.center - center) > 0.05 * stack_.size.width) {
-      dir = light.center - center;
-      dir /= cv::norm(dir);
-    }
-    const cv::Point2d d = p - center;
-    return std::abs(d.x * dir.y - d.y * dir.x);
-  }
+  // Distance of a point (capture pixels) from the flare axis of a frame.
+  double axisOffset(int pos, cv::Point2d p) { return flareAxisOffset(p, lightOf(pos), stack_.size); }
 
   // The noise σ of a frame (of the frame itself: see FramePyramid).
   double noiseOf(int pos) {
@@ -390,10 +378,7 @@ class CaptureFitter {
   // frame − S, and the ghost's fit chases it (measured on Heliar, every-5th frame: recall
   // 21.7 → 23.3 %, Tessar 29.8 → 40.4 %, median PSNR 14.4 → 20.4 and 12.4 → 19.5 dB).
   cv::Mat withoutLight(int pos) {
-    const Frame& f = frame(pos);
-    const LightImage& light = lightOf(pos);
-    if (!light.found || !options_.detection.light_symmetry) return f.image;
-    return f.image - estimateLightImage(f.image, f.valid, light, noiseOf(pos), options_.detection);
+    return frameWithoutLight(frame(pos), lightOf(pos), noiseOf(pos), options_.detection);
   }
 
   void fitFrame(int pos, bool forward) {
@@ -526,14 +511,12 @@ class CaptureFitter {
     const int kd = detectionFactor();
     const FrameData& level = data.level(kd);
     cv::Mat residual = residualAt(level, ghosts);
-    LightImage light = lightOf(pos);
+    const LightImage& light_full = lightOf(pos);
     FrameFit& record = frame_fits_[pos];
-    record.light_found = light.found;
-    record.light_center = light.center;
-    record.light_zone_px = light.zone_radius_px;
-    light.center /= kd;
-    light.zone_radius_px /= kd;
-    light.core_radius_px /= kd;
+    record.light_found = light_full.found;
+    record.light_center = light_full.center;
+    record.light_zone_px = light_full.zone_radius_px;
+    const LightImage light = light_full.atLevel(kd);
     auto candidates = detectGhosts(residual, level.valid, level.noise_sigma, light, options_.detection);
     for (const auto& c : candidates) {
       GhostParameters grey = c.seed;
@@ -724,26 +707,22 @@ class CaptureFitter {
 
 }  // namespace
 
-cv::Mat frameWithoutLight(const Frame& frame, const DetectionOptions& options) {
-  if (!options.light_symmetry) return frame.image;
-  const double noise_sigma = estimateNoiseSigma(frame.image, frame.valid);
-  const LightImage light = findLight(luminance(frame.image), frame.valid, noise_sigma, options);
-  if (!light.found) return frame.image;
+cv::Mat frameWithoutLight(const Frame& frame, const LightImage& light, double noise_sigma,
+                          const DetectionOptions& options) {
+  if (!light.found || !options.light_symmetry) return frame.image;
   return frame.image - estimateLightImage(frame.image, frame.valid, light, noise_sigma, options);
 }
 
 std::vector<GhostParameters> detectSeeds(const Frame& frame, int channels, const FitOptions& options) {
   EdgeFilter edge(options.cost);
-  LightImage light = findLight(luminance(frame.image), frame.valid,
-                               estimateNoiseSigma(frame.image, frame.valid), options.detection);
-  FramePyramid pyramid(frameWithoutLight(frame, options.detection), frame.valid, edge,
-                       estimateNoiseSigma(frame.image, frame.valid));
+  const double noise_sigma = estimateNoiseSigma(frame.image, frame.valid);
+  const LightImage light_full = findLight(luminance(frame.image), frame.valid, noise_sigma, options.detection);
+  FramePyramid pyramid(frameWithoutLight(frame, light_full, noise_sigma, options.detection), frame.valid,
+                       edge, noise_sigma);
   const int kd = std::max(1, static_cast<int>(std::floor(std::sqrt(frame.image.size().area() / 160000.0))));
   const FrameData& level = pyramid.level(kd);
   const cv::Mat lum = luminance(level.image);
-  light.center /= kd;
-  light.zone_radius_px /= kd;
-  light.core_radius_px /= kd;
+  const LightImage light = light_full.atLevel(kd);
   std::vector<GhostParameters> seeds;
   for (const auto& c : detectGhosts(lum, level.valid, level.noise_sigma, light, options.detection)) {
     GhostParameters g = c.seed;

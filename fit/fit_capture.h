@@ -144,8 +144,10 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   const model::CaptureInfo& info, int channels, int degree);
 
 // The frame minus the light's own image (detection.h estimateLightImage, from the frame alone):
-// what detection and first fits of a frame see. The frame itself without a light.
-cv::Mat frameWithoutLight(const Frame& frame, const DetectionOptions& options);
+// what the fitter detects and fits ghosts in. The frame itself without a light in it or with
+// options.light_symmetry off.
+cv::Mat frameWithoutLight(const Frame& frame, const LightImage& light, double noise_sigma,
+                          const DetectionOptions& options);
 
 // The seeds detection finds in one frame with nothing modelled yet (brightest first), in the
 // stack's channel count: what the fitter starts new ghosts from (and what `bench fit` starts both

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "common/error.h"
+#include "common/image.h"
 #include "common/progress.h"
 #include "fit/evaluation.h"
 
@@ -33,8 +34,10 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
     auto seeds = detectSeeds(frame, stack.channels, options.fit);
     if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
     // The data the fitter sees: the frame without the light's own image.
-    FramePyramid pyramid(frameWithoutLight(frame, options.fit.detection), frame.valid, edge,
-                         estimateNoiseSigma(frame.image, frame.valid));
+    const double noise_sigma = estimateNoiseSigma(frame.image, frame.valid);
+    const LightImage light = findLight(luminance(frame.image), frame.valid, noise_sigma, options.fit.detection);
+    FramePyramid pyramid(frameWithoutLight(frame, light, noise_sigma, options.fit.detection), frame.valid,
+                         edge, noise_sigma);
     for (const auto& seed : seeds) {
       std::vector<model::GhostParameters> one = {seed};
       SolverOptions gd = options.fit.solver;
