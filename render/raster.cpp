@@ -129,6 +129,23 @@ inline bool inside(const RasterTriangle& t, float dx, float dy) {
   return true;
 }
 
+// Whether no pixel centre of columns [x0, x1] and rows [y0, y1] can be inside triangle `t`
+// (sampled, not splatted): one edge is negative at all four corner centres. The edge functions
+// are evaluated as rasterizeInto evaluates them, and each rounded operation is monotonic, so
+// over the rectangle they peak at a corner: when this says no, rasterizeInto adds nothing there.
+// Long thin triangles (caustics, grazing cells) cross the boxes of many tiles they never touch.
+bool missesPixels(const RasterTriangle& t, int x0, int x1, int y0, int y1) {
+  const float dx0 = (static_cast<float>(x0) + 0.5f) - t.ox, dx1 = (static_cast<float>(x1) + 0.5f) - t.ox;
+  const float dy0 = (static_cast<float>(y0) + 0.5f) - t.oy, dy1 = (static_cast<float>(y1) + 0.5f) - t.oy;
+  for (int k = 0; k < 3; ++k) {
+    const float base0 = t.eb[k] * dy0 + t.ec[k], base1 = t.eb[k] * dy1 + t.ec[k];
+    if (t.ea[k] * dx0 + base0 < 0.0f && t.ea[k] * dx1 + base0 < 0.0f &&
+        t.ea[k] * dx0 + base1 < 0.0f && t.ea[k] * dx1 + base1 < 0.0f)
+      return true;
+  }
+  return false;
+}
+
 // Interior spans are accumulated in aligned chunks of this many pixels (one AVX2 vector).
 constexpr int kChunk = 8;
 typedef float Vec8 __attribute__((vector_size(4 * kChunk)));
@@ -458,14 +475,21 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
   struct Ref {
     uint32_t batch, index;
   };
-  // Level 1: every triangle into the coarse tiles its bounding box overlaps, counted per batch in
-  // parallel, then laid out tile by tile in batch order (deterministic).
+  // Level 1: every triangle into the coarse tiles its bounding box overlaps (less those whose
+  // pixels it misses, when the box spans several), counted per batch in parallel, then laid out
+  // tile by tile in batch order (deterministic).
+  auto missesCoarseTile = [&](const RasterTriangle& t, int tx, int ty) {
+    if (t.splat || (t.x0 / C == t.x1 / C && t.y0 / C == t.y1 / C)) return false;
+    return missesPixels(t, std::max(t.x0, tx * C), std::min(t.x1, tx * C + C - 1),
+                        std::max(t.y0, ty * C), std::min(t.y1, ty * C + C - 1));
+  };
   std::vector<std::vector<int>> counts(batches.size(), std::vector<int>(static_cast<size_t>(tiles), 0));
   tbb::parallel_for(size_t{0}, batches.size(), [&](size_t b) {
     auto& c = counts[b];
     for (const RasterTriangle& t : batches[b])
       for (int ty = t.y0 / C; ty <= t.y1 / C; ++ty)
-        for (int tx = t.x0 / C; tx <= t.x1 / C; ++tx) ++c[static_cast<size_t>(ty * ncx + tx)];
+        for (int tx = t.x0 / C; tx <= t.x1 / C; ++tx)
+          if (!missesCoarseTile(t, tx, ty)) ++c[static_cast<size_t>(ty * ncx + tx)];
   });
   std::vector<size_t> start(static_cast<size_t>(tiles) + 1, 0);
   std::vector<std::vector<size_t>> batch_offset(batches.size(), std::vector<size_t>(static_cast<size_t>(tiles)));
@@ -484,7 +508,8 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       const RasterTriangle& t = batches[b][i];
       for (int ty = t.y0 / C; ty <= t.y1 / C; ++ty)
         for (int tx = t.x0 / C; tx <= t.x1 / C; ++tx)
-          refs[offset[static_cast<size_t>(ty * ncx + tx)]++] = {static_cast<uint32_t>(b), static_cast<uint32_t>(i)};
+          if (!missesCoarseTile(t, tx, ty))
+            refs[offset[static_cast<size_t>(ty * ncx + tx)]++] = {static_cast<uint32_t>(b), static_cast<uint32_t>(i)};
     }
   });
   // Level 2 and accumulation, one coarse tile per task: the coarse tile's triangles are dealt to
@@ -502,8 +527,16 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       const RasterTriangle& t = batches[refs[k].batch][refs[k].index];
       const int fx0 = (std::max(t.x0, tx0) - tx0) / F, fx1 = (std::min(t.x1, tx0 + tw - 1) - tx0) / F;
       const int fy0 = (std::max(t.y0, ty0) - ty0) / F, fy1 = (std::min(t.y1, ty0 + th - 1) - ty0) / F;
+      const bool one = fx0 == fx1 && fy0 == fy1;
       for (int fy = fy0; fy <= fy1; ++fy)
-        for (int fx = fx0; fx <= fx1; ++fx) fine[static_cast<size_t>(fy * nfx + fx)].push_back(&t);
+        for (int fx = fx0; fx <= fx1; ++fx) {
+          const int px0 = tx0 + fx * F, py0 = ty0 + fy * F;
+          if (!one && !t.splat &&
+              missesPixels(t, std::max(t.x0, px0), std::min(t.x1, px0 + F - 1), std::max(t.y0, py0),
+                           std::min(t.y1, py0 + F - 1)))
+            continue;
+          fine[static_cast<size_t>(fy * nfx + fx)].push_back(&t);
+        }
     }
     // The fine tiles are tasks too (nested in the coarse tile's task), so that the two cores
     // share the work of a crowded coarse tile (where the light's ghosts pile up) instead of one
