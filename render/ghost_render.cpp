@@ -15,8 +15,13 @@ namespace flarekit::render {
 
 namespace {
 // Sub-grid sizes for the cells along discontinuous ghost edges (first level, deeper levels).
+// The second level halves its cells (an edge to 1/8 of a grid cell) rather than quartering them
+// (1/16): it traced 44 % of a Heliar frame's rays (445 k of 1.01 M at 10°) and yielded 19 % of
+// its triangles; halving cuts the frame to 0.74 M rays and hardly changes the image (PSNR
+// 81 dB against the 1/16 edges at 0°, 85 dB at 5°, identical at 15°). Two levels of halving
+// instead of quartering first cost about as many rays and resolve worse (67 dB).
 constexpr int kRefine = 4;
-constexpr int kRefineDeeper = 4;
+constexpr int kRefineDeeper = 2;
 constexpr int kRefineDepth = 2;
 
 // Builds the triangles of a traced grid (its rays from `first_ray` on); cells across a

@@ -441,7 +441,27 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
         refine->push_back(j * n + i);
         continue;
       }
-      if (!all_alive) continue;
+      if (!all_alive) {
+        // Not refined further (the last level): of a quad with one dead corner, the triangle of
+        // its three live corners still carries its half of the cell's pupil area to the sensor.
+        int dead = -1, count = 0;
+        for (int c = 0; c < 4; ++c)
+          if (!rays.alive[corner[c]]) {
+            dead = c;
+            ++count;
+          }
+        if (count != 1) continue;
+        RasterVertex v[4] = {vertex(i, j), vertex(i + 1, j), vertex(i, j + 1), vertex(i + 1, j + 1)};
+        // The other three in the order around the quad (00, 10, 11, 01), skipping the dead one.
+        const int ring[4] = {0, 1, 3, 2};
+        RasterVertex tri[3];
+        int m = 0;
+        for (int r : ring)
+          if (r != dead) tri[m++] = v[r];
+        if (makeTriangle(tri[0], tri[1], tri[2], mapping, aperture, cell_flux, weight, batch, &t))
+          out->push_back(t);
+        continue;
+      }
       const RasterVertex v00 = vertex(i, j), v10 = vertex(i + 1, j);
       const RasterVertex v01 = vertex(i, j + 1), v11 = vertex(i + 1, j + 1);
       if (makeTriangle(v00, v10, v11, mapping, aperture, cell_flux, weight, batch, &t)) out->push_back(t);
