@@ -343,6 +343,35 @@ bool addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* im
       }
     }
   }
+  // The rim band's pixels worth evaluating, [e0, e1]: for a straight-bladed polygon, the row's
+  // chord of the polygon grown by half a pixel (beyond it the coverage is 0: a large hexagonal
+  // sprite's circle of radius r + 1 reaches 13 % of r past its sides), a pixel wider on each side
+  // for rounding. Pixels outside it would add nothing.
+  int e0 = x0, e1 = x1;
+  if (aperture.shape().kind == ApertureKind::kPolygon && aperture.rounding() == 0.0f) {
+    const double v = dy / sp.m;
+    const double limit = aperture.apothem() + 0.5 / r;
+    double u_lo = -1e30, u_hi = 1e30;
+    for (int k = 0; k < aperture.edgeCount(); ++k) {
+      const double nx = aperture.edgeNormalX(k), ny = aperture.edgeNormalY(k);
+      const double bound = limit - v * ny;  // u·nx < bound inside
+      if (nx > 1e-9)
+        u_hi = std::min(u_hi, bound / nx);
+      else if (nx < -1e-9)
+        u_lo = std::max(u_lo, bound / nx);
+      else if (bound < -1e-6)
+        u_hi = -1e30;
+    }
+    if (u_lo < u_hi) {
+      const double xa = sp.cx + u_lo * sp.m - 0.5, xb = sp.cx + u_hi * sp.m - 0.5;
+      const double lo = std::clamp(std::min(xa, xb), x0 - 2.0, x1 + 2.0);
+      const double hi = std::clamp(std::max(xa, xb), x0 - 2.0, x1 + 2.0);
+      e0 = std::max(x0, static_cast<int>(std::floor(lo)) - 1);
+      e1 = std::min(x1, static_cast<int>(std::ceil(hi)) + 1);
+    } else {
+      e0 = x1 + 1;  // the row misses the polygon (and its flat span is empty)
+    }
+  }
   auto* row = image->ptr<cv::Vec3f>(y);
   const cv::Vec3f flat = sp.weight * sp.value;
   const float footprint = static_cast<float>(1.0 / r);
@@ -353,14 +382,14 @@ bool addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* im
     if (a > 0) row[x] += sp.weight * (sp.value * a);
   };
   if (i0 > i1) {
-    for (int x = x0; x <= x1; ++x) edge(x);
+    for (int x = e0; x <= e1; ++x) edge(x);
     return false;
   }
-  for (int x = x0; x < i0; ++x) edge(x);
+  for (int x = e0; x < std::min(i0, e1 + 1); ++x) edge(x);
   steps->push_back({i0, {flat[0], flat[1], flat[2], 1.0}});
   steps->push_back({i1 + 1, {-static_cast<double>(flat[0]), -static_cast<double>(flat[1]),
                              -static_cast<double>(flat[2]), -1.0}});
-  for (int x = i1 + 1; x <= x1; ++x) edge(x);
+  for (int x = std::max(i1 + 1, e0); x <= e1; ++x) edge(x);
   return true;
 }
 
