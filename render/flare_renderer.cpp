@@ -189,8 +189,12 @@ FlareImage renderFlare(const Lens& lens, const LightDirection& light,
                             : std::hypot(options.width_px, options.height_px) / 8.0;
   cv::Mat pattern;
   if (options.light_source && options.starburst) pattern = starburstPattern(setup.aperture, 256);
+  // The wavelengths' direct light traced in parallel (a bound and a 48² grid each: as long as the
+  // whole matrix render otherwise), used in order.
+  std::vector<DirectLight> direct(static_cast<size_t>(ns));
+  tbb::parallel_for(0, ns, [&](int s) { direct[static_cast<size_t>(s)] = traceDirectLight(setup, s); });
   for (int s = 0; s < ns; ++s) {
-    const DirectLight d = traceDirectLight(setup, s);
+    const DirectLight& d = direct[static_cast<size_t>(s)];
     if (!d.valid) continue;
     const double lum = std::max(1e-6, static_cast<double>(setup.samples[static_cast<size_t>(s)].rgb_weight[1]) + 1e-3);
     cx += lum * d.center_px.x;

@@ -15,8 +15,13 @@ namespace flarekit::render {
 
 namespace {
 // Sub-grid sizes for the cells along discontinuous ghost edges (first level, deeper levels).
+// The second level halves its cells (an edge to 1/8 of a grid cell) rather than quartering them
+// (1/16): it traced 44 % of a Heliar frame's rays (445 k of 1.01 M at 10°) and yielded 19 % of
+// its triangles; halving cuts the frame to 0.74 M rays and hardly changes the image (PSNR
+// 81 dB against the 1/16 edges at 0°, 85 dB at 5°, identical at 15°). Two levels of halving
+// instead of quartering first cost about as many rays and resolve worse (67 dB).
 constexpr int kRefine = 4;
-constexpr int kRefineDeeper = 4;
+constexpr int kRefineDeeper = 2;
 constexpr int kRefineDepth = 2;
 
 // Builds the triangles of a traced grid (its rays from `first_ray` on); cells across a
@@ -277,13 +282,20 @@ std::vector<Sprite> ghostSprites(const RenderSetup& setup, const Ghost& ghost) {
   return sprites;
 }
 
+// A step of a row's flat spans at pixel x: RGB and the span count, up at a span's start and down
+// past its end.
+struct SpanStep {
+  int x;
+  double delta[4];
+};
+
 // Adds the sprites' pixels on row y. Inside the iris's inscribed circle (less half a pixel) the
-// sprite is flat: its constant goes into `step` (RGB and a span count: 4 doubles a pixel,
-// cols + 1 pixels) as a step up
-// at the span's start and down past its end, for the caller to integrate once for all sprites
-// (many sprites cover the whole frame, which would otherwise cost a pass over it each); only the
-// rim band evaluates the aperture. Returns whether it added a step.
-bool addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* image, double* step) {
+// sprite is flat: its constant goes into `steps` as a step up at the span's start and down past
+// its end, for the caller to integrate once for all sprites (many sprites cover the whole frame,
+// which would otherwise cost a pass over it each); only the rim band evaluates the aperture.
+// Returns whether it added a step.
+bool addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* image,
+                  std::vector<SpanStep>* steps) {
   const double r = std::abs(sp.m);
   const double dy = y + 0.5 - sp.cy;
   if (std::abs(dy) > r + 1.0) return false;
@@ -331,6 +343,35 @@ bool addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* im
       }
     }
   }
+  // The rim band's pixels worth evaluating, [e0, e1]: for a straight-bladed polygon, the row's
+  // chord of the polygon grown by half a pixel (beyond it the coverage is 0: a large hexagonal
+  // sprite's circle of radius r + 1 reaches 13 % of r past its sides), a pixel wider on each side
+  // for rounding. Pixels outside it would add nothing.
+  int e0 = x0, e1 = x1;
+  if (aperture.shape().kind == ApertureKind::kPolygon && aperture.rounding() == 0.0f) {
+    const double v = dy / sp.m;
+    const double limit = aperture.apothem() + 0.5 / r;
+    double u_lo = -1e30, u_hi = 1e30;
+    for (int k = 0; k < aperture.edgeCount(); ++k) {
+      const double nx = aperture.edgeNormalX(k), ny = aperture.edgeNormalY(k);
+      const double bound = limit - v * ny;  // u·nx < bound inside
+      if (nx > 1e-9)
+        u_hi = std::min(u_hi, bound / nx);
+      else if (nx < -1e-9)
+        u_lo = std::max(u_lo, bound / nx);
+      else if (bound < -1e-6)
+        u_hi = -1e30;
+    }
+    if (u_lo < u_hi) {
+      const double xa = sp.cx + u_lo * sp.m - 0.5, xb = sp.cx + u_hi * sp.m - 0.5;
+      const double lo = std::clamp(std::min(xa, xb), x0 - 2.0, x1 + 2.0);
+      const double hi = std::clamp(std::max(xa, xb), x0 - 2.0, x1 + 2.0);
+      e0 = std::max(x0, static_cast<int>(std::floor(lo)) - 1);
+      e1 = std::min(x1, static_cast<int>(std::ceil(hi)) + 1);
+    } else {
+      e0 = x1 + 1;  // the row misses the polygon (and its flat span is empty)
+    }
+  }
   auto* row = image->ptr<cv::Vec3f>(y);
   const cv::Vec3f flat = sp.weight * sp.value;
   const float footprint = static_cast<float>(1.0 / r);
@@ -341,17 +382,14 @@ bool addSpriteRow(const Sprite& sp, const Aperture& aperture, int y, cv::Mat* im
     if (a > 0) row[x] += sp.weight * (sp.value * a);
   };
   if (i0 > i1) {
-    for (int x = x0; x <= x1; ++x) edge(x);
+    for (int x = e0; x <= e1; ++x) edge(x);
     return false;
   }
-  for (int x = x0; x < i0; ++x) edge(x);
-  for (int c = 0; c < 3; ++c) {
-    step[4 * i0 + c] += flat[c];
-    step[4 * (i1 + 1) + c] -= flat[c];
-  }
-  step[4 * i0 + 3] += 1.0;  // spans open
-  step[4 * (i1 + 1) + 3] -= 1.0;
-  for (int x = i1 + 1; x <= x1; ++x) edge(x);
+  for (int x = e0; x < std::min(i0, e1 + 1); ++x) edge(x);
+  steps->push_back({i0, {flat[0], flat[1], flat[2], 1.0}});
+  steps->push_back({i1 + 1, {-static_cast<double>(flat[0]), -static_cast<double>(flat[1]),
+                             -static_cast<double>(flat[2]), -1.0}});
+  for (int x = std::max(i1 + 1, e0); x <= e1; ++x) edge(x);
   return true;
 }
 
@@ -367,25 +405,39 @@ void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts
     for (const Sprite& s : ghostSprites(setup, g)) sprites.push_back(s);
   // Rows in parallel: each row sums every sprite that crosses it, the flat spans integrated from
   // their steps in one pass, in double; where no span is open the sum restarts from exactly 0, so
-  // rounding leaves nothing behind a bright span.
+  // rounding leaves nothing behind a bright span. Between two steps the sum is constant: it is
+  // added to the run of pixels as it stands (a few hundred steps a row instead of a pass over
+  // every pixel in double). The steps at one pixel are combined in the order the sprites made
+  // them, then added to the sum, as a per-pixel step array would.
   const int cols = image->cols;
   tbb::parallel_for(tbb::blocked_range<int>(0, image->rows, 8), [&](const tbb::blocked_range<int>& rows) {
-    std::vector<double> step(4 * (static_cast<size_t>(cols) + 1));
+    std::vector<SpanStep> steps;
     for (int y = rows.begin(); y < rows.end(); ++y) {
-      std::fill(step.begin(), step.end(), 0.0);
-      bool flat = false;
-      for (const Sprite& s : sprites) flat |= addSpriteRow(s, setup.aperture, y, image, step.data());
-      if (!flat) continue;
+      steps.clear();
+      for (const Sprite& s : sprites) addSpriteRow(s, setup.aperture, y, image, &steps);
+      if (steps.empty()) continue;
+      std::stable_sort(steps.begin(), steps.end(),
+                       [](const SpanStep& a, const SpanStep& b) { return a.x < b.x; });
       float* row = image->ptr<float>(y);
       double sum[4] = {0.0, 0.0, 0.0, 0.0};
-      for (int x = 0; x < cols; ++x) {
-        const double* st = &step[4 * static_cast<size_t>(x)];
-        for (int c = 0; c < 4; ++c) sum[c] += st[c];
+      for (size_t k = 0; k < steps.size();) {
+        const int x = steps[k].x;
+        double combined[4] = {0.0, 0.0, 0.0, 0.0};
+        for (; k < steps.size() && steps[k].x == x; ++k)
+          for (int c = 0; c < 4; ++c) combined[c] += steps[k].delta[c];
+        for (int c = 0; c < 4; ++c) sum[c] += combined[c];
         if (sum[3] < 0.5) {  // no span open (the count is an exact small integer)
           sum[0] = sum[1] = sum[2] = 0.0;
           continue;
         }
-        for (int c = 0; c < 3; ++c) row[3 * x + c] += static_cast<float>(sum[c]);
+        const int end = std::min(cols, k < steps.size() ? steps[k].x : cols);
+        const float r = static_cast<float>(sum[0]), g = static_cast<float>(sum[1]),
+                    b = static_cast<float>(sum[2]);
+        for (int p = x; p < end; ++p) {
+          row[3 * p] += r;
+          row[3 * p + 1] += g;
+          row[3 * p + 2] += b;
+        }
       }
     }
   });

@@ -129,8 +129,30 @@ inline bool inside(const RasterTriangle& t, float dx, float dy) {
   return true;
 }
 
+// Whether no pixel centre of columns [x0, x1] and rows [y0, y1] can be inside triangle `t`
+// (sampled, not splatted): one edge is negative at all four corner centres. The edge functions
+// are evaluated as rasterizeInto evaluates them, and each rounded operation is monotonic, so
+// over the rectangle they peak at a corner: when this says no, rasterizeInto adds nothing there.
+// Long thin triangles (caustics, grazing cells) cross the boxes of many tiles they never touch.
+bool missesPixels(const RasterTriangle& t, int x0, int x1, int y0, int y1) {
+  const float dx0 = (static_cast<float>(x0) + 0.5f) - t.ox, dx1 = (static_cast<float>(x1) + 0.5f) - t.ox;
+  const float dy0 = (static_cast<float>(y0) + 0.5f) - t.oy, dy1 = (static_cast<float>(y1) + 0.5f) - t.oy;
+  for (int k = 0; k < 3; ++k) {
+    const float base0 = t.eb[k] * dy0 + t.ec[k], base1 = t.eb[k] * dy1 + t.ec[k];
+    if (t.ea[k] * dx0 + base0 < 0.0f && t.ea[k] * dx1 + base0 < 0.0f &&
+        t.ea[k] * dx0 + base1 < 0.0f && t.ea[k] * dx1 + base1 < 0.0f)
+      return true;
+  }
+  return false;
+}
+
 // Interior spans are accumulated in aligned chunks of this many pixels (one AVX2 vector).
 constexpr int kChunk = 8;
+typedef float Vec8 __attribute__((vector_size(4 * kChunk)));
+typedef float Vec8U __attribute__((vector_size(4 * kChunk), aligned(4), may_alias));  // in a buffer
+typedef int Int8 __attribute__((vector_size(4 * kChunk)));
+constexpr Vec8 kLaneCentre = {0.5f, 1.5f, 2.5f, 3.5f, 4.5f, 5.5f, 6.5f, 7.5f};  // pixel centres
+constexpr Int8 kLaneIndex = {0, 1, 2, 3, 4, 5, 6, 7};
 
 // Planar RGB accumulation buffer covering pixels [bx, bx + stride) × [by, by + rows); the stride
 // is a multiple of kChunk.
@@ -190,33 +212,45 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
   // a finite reciprocal keep the division.)
   float inv_a[3];
   for (int k = 0; k < 3; ++k) inv_a[k] = std::abs(t.ea[k]) > 1e-30f ? 1.0f / t.ea[k] : 0.0f;
+  // In RGB mode each wavelength's colour weight is one primary: the other two planes would only
+  // get +0 added (which changes nothing), so only the planes with a non-zero weight are touched.
+  float* plane[3];
+  float w[3];
+  int planes = 0;
+  for (int c = 0; c < 3; ++c) {
+    if (t.weight[c] == 0.0f) continue;
+    plane[planes] = c == 0 ? p.r : c == 1 ? p.g : p.b;
+    w[planes++] = t.weight[c];
+  }
+  if (planes == 0) return;
   for (int y = y0; y <= y1; ++y) {
     const float dy = (y + 0.5f) - t.oy;
     float base[3];
-    float lo = static_cast<float>(x0), hi = static_cast<float>(x1);
+    // lo_edge/hi_edge: the span's ends from the edges alone (not clipped to [x0, x1]).
+    float lo_edge = -std::numeric_limits<float>::infinity();
+    float hi_edge = std::numeric_limits<float>::infinity();
     bool empty = false;
     for (int k = 0; k < 3; ++k) {
       base[k] = t.eb[k] * dy + t.ec[k];
       const float a = t.ea[k];
       const float cross = inv_a[k] != 0.0f ? base[k] * inv_a[k] : base[k] / a;
       if (a > 0.0f)
-        lo = std::max(lo, t.ox - 0.5f - cross);
+        lo_edge = std::max(lo_edge, t.ox - 0.5f - cross);
       else if (a < 0.0f)
-        hi = std::min(hi, t.ox - 0.5f - cross);
+        hi_edge = std::min(hi_edge, t.ox - 0.5f - cross);
       else if (base[k] < 0.0f || (base[k] == 0.0f && !t.top_left[k]))
         empty = true;
     }
+    const float lo = std::max(static_cast<float>(x0), lo_edge);
+    const float hi = std::min(static_cast<float>(x1), hi_edge);
     if (empty || !(lo <= hi + 2.0f)) continue;
     const int xs = std::max(x0, static_cast<int>(std::floor(lo)) - 1);
     const int xe = std::min(x1, static_cast<int>(std::ceil(hi)) + 1);
     const size_t row = static_cast<size_t>(y - p.by) * static_cast<size_t>(p.stride);
-    float* __restrict__ R = p.r + row - p.bx;
-    float* __restrict__ G = p.g + row - p.bx;
-    float* __restrict__ B = p.b + row - p.bx;
     const bool tl0 = t.top_left[0], tl1 = t.top_left[1], tl2 = t.top_left[2];
     const float a0 = t.ea[0], a1 = t.ea[1], a2 = t.ea[2];
     const float b0 = base[0], b1 = base[1], b2 = base[2];
-    const float trow = t.t0 + t.ty * dy, tx = t.tx;
+    const float trow = t.t0 + t.ty * dy, tx = t.tx, ox = t.ox;
     if (t.interior) {
       // A = C = 1: only the interpolated transmission. The top-left test is folded into one
       // threshold per edge (e > 0 is e ≥ the smallest denormal) so the loop is branch-free and
@@ -229,25 +263,46 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
       // span [xs, xe] add exactly +0.
       const int c0 = p.bx + ((xs - p.bx) & ~(kChunk - 1));
       const int chunks = (xe - c0) / kChunk + 1;
-      for (int c = 0; c < chunks; ++c) {
-        const int xb = c0 + c * kChunk;
-#pragma GCC ivdep
-        for (int i = 0; i < kChunk; ++i) {
-          // The same expression as everywhere else, so that every caller decides ties alike.
-          const int x = xb + i;
-          const float dx = (static_cast<float>(x) + 0.5f) - t.ox;
-          const float e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
-          const float in = static_cast<float>((e0 >= th0) & (e1 >= th1) & (e2 >= th2) &
-                                              (x >= xs) & (x <= xe));
-          const float tr = trow + tx * dx;
-          const float v = in * (tr > 0.0f ? tr : 0.0f);
-          R[x] += wr * v;
-          G[x] += wg * v;
-          B[x] += wb * v;
+      // Pixels a whole pixel inside the edges' span are inside every edge: the span's ends and
+      // the edge functions are both rounded far below a pixel (|x − ox| < 1e5 px, float), so the
+      // exact test could only say yes there. Chunks wholly in that run skip it (the bulk of a
+      // large ghost's pixels); the chunks at the ends take it, so ties are decided as before
+      // and the result is the same.
+      int fast_begin = chunks, fast_end = chunks;  // chunks [fast_begin, fast_end)
+      if (lo_edge + 1.0f <= hi_edge - 1.0f) {
+        const int ms = std::max(xs, static_cast<int>(std::ceil(lo_edge + 1.0f)));
+        const int me = std::min(xe, static_cast<int>(std::floor(hi_edge - 1.0f)));
+        if (ms <= me) {
+          fast_begin = (ms - c0 + kChunk - 1) / kChunk;
+          fast_end = std::max(fast_begin, (me + 1 - c0) / kChunk);
+        }
+      }
+      // The chunks as explicit 8-float vectors (GCC vector extensions: one AVX2 vector, two
+      // SSE2 ones), the same IEEE operations a lane as the scalar expressions they replace.
+      for (int q = 0; q < planes; ++q) {
+        float* P = plane[q] + row - p.bx;
+        const float wp = w[q];
+        for (int c = 0; c < chunks; ++c) {
+          const int xb = c0 + c * kChunk;
+          const Vec8 dx = (static_cast<float>(xb) + kLaneCentre) - ox;  // x + 0.5 exact: x < 2²²
+          const Vec8 tr = trow + tx * dx;
+          Vec8 v = tr > 0.0f ? tr : Vec8{};
+          if (c < fast_begin || c >= fast_end) {
+            // The exact test, the same expression as everywhere else so that every caller
+            // decides ties alike.
+            const Vec8 e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
+            const Int8 x = xb + kLaneIndex;
+            const Int8 in = (e0 >= th0) & (e1 >= th1) & (e2 >= th2) & (x >= xs) & (x <= xe);
+            v = in ? v : Vec8{};
+          }
+          Vec8U* out = reinterpret_cast<Vec8U*>(P + xb);
+          *out = *out + wp * v;
         }
       }
       continue;
     }
+    float* rows[3];
+    for (int q = 0; q < planes; ++q) rows[q] = plane[q] + row - p.bx;
     for (int x = xs; x <= xe; ++x) {
       const float dx = (x + 0.5f) - t.ox;
       const float e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
@@ -255,9 +310,7 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
                       (e2 > 0.0f || (tl2 && e2 == 0.0f));
       if (!in) continue;
       const float s = shade(t, aperture, dx, dy);
-      R[x] += wr * s;
-      G[x] += wg * s;
-      B[x] += wb * s;
+      for (int q = 0; q < planes; ++q) rows[q][x] += w[q] * s;
     }
   }
 }
@@ -388,7 +441,27 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
         refine->push_back(j * n + i);
         continue;
       }
-      if (!all_alive) continue;
+      if (!all_alive) {
+        // Not refined further (the last level): of a quad with one dead corner, the triangle of
+        // its three live corners still carries its half of the cell's pupil area to the sensor.
+        int dead = -1, count = 0;
+        for (int c = 0; c < 4; ++c)
+          if (!rays.alive[corner[c]]) {
+            dead = c;
+            ++count;
+          }
+        if (count != 1) continue;
+        RasterVertex v[4] = {vertex(i, j), vertex(i + 1, j), vertex(i, j + 1), vertex(i + 1, j + 1)};
+        // The other three in the order around the quad (00, 10, 11, 01), skipping the dead one.
+        const int ring[4] = {0, 1, 3, 2};
+        RasterVertex tri[3];
+        int m = 0;
+        for (int r : ring)
+          if (r != dead) tri[m++] = v[r];
+        if (makeTriangle(tri[0], tri[1], tri[2], mapping, aperture, cell_flux, weight, batch, &t))
+          out->push_back(t);
+        continue;
+      }
       const RasterVertex v00 = vertex(i, j), v10 = vertex(i + 1, j);
       const RasterVertex v01 = vertex(i, j + 1), v11 = vertex(i + 1, j + 1);
       if (makeTriangle(v00, v10, v11, mapping, aperture, cell_flux, weight, batch, &t)) out->push_back(t);
@@ -422,14 +495,21 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
   struct Ref {
     uint32_t batch, index;
   };
-  // Level 1: every triangle into the coarse tiles its bounding box overlaps, counted per batch in
-  // parallel, then laid out tile by tile in batch order (deterministic).
+  // Level 1: every triangle into the coarse tiles its bounding box overlaps (less those whose
+  // pixels it misses, when the box spans several), counted per batch in parallel, then laid out
+  // tile by tile in batch order (deterministic).
+  auto missesCoarseTile = [&](const RasterTriangle& t, int tx, int ty) {
+    if (t.splat || (t.x0 / C == t.x1 / C && t.y0 / C == t.y1 / C)) return false;
+    return missesPixels(t, std::max(t.x0, tx * C), std::min(t.x1, tx * C + C - 1),
+                        std::max(t.y0, ty * C), std::min(t.y1, ty * C + C - 1));
+  };
   std::vector<std::vector<int>> counts(batches.size(), std::vector<int>(static_cast<size_t>(tiles), 0));
   tbb::parallel_for(size_t{0}, batches.size(), [&](size_t b) {
     auto& c = counts[b];
     for (const RasterTriangle& t : batches[b])
       for (int ty = t.y0 / C; ty <= t.y1 / C; ++ty)
-        for (int tx = t.x0 / C; tx <= t.x1 / C; ++tx) ++c[static_cast<size_t>(ty * ncx + tx)];
+        for (int tx = t.x0 / C; tx <= t.x1 / C; ++tx)
+          if (!missesCoarseTile(t, tx, ty)) ++c[static_cast<size_t>(ty * ncx + tx)];
   });
   std::vector<size_t> start(static_cast<size_t>(tiles) + 1, 0);
   std::vector<std::vector<size_t>> batch_offset(batches.size(), std::vector<size_t>(static_cast<size_t>(tiles)));
@@ -448,7 +528,8 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       const RasterTriangle& t = batches[b][i];
       for (int ty = t.y0 / C; ty <= t.y1 / C; ++ty)
         for (int tx = t.x0 / C; tx <= t.x1 / C; ++tx)
-          refs[offset[static_cast<size_t>(ty * ncx + tx)]++] = {static_cast<uint32_t>(b), static_cast<uint32_t>(i)};
+          if (!missesCoarseTile(t, tx, ty))
+            refs[offset[static_cast<size_t>(ty * ncx + tx)]++] = {static_cast<uint32_t>(b), static_cast<uint32_t>(i)};
     }
   });
   // Level 2 and accumulation, one coarse tile per task: the coarse tile's triangles are dealt to
@@ -466,8 +547,16 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       const RasterTriangle& t = batches[refs[k].batch][refs[k].index];
       const int fx0 = (std::max(t.x0, tx0) - tx0) / F, fx1 = (std::min(t.x1, tx0 + tw - 1) - tx0) / F;
       const int fy0 = (std::max(t.y0, ty0) - ty0) / F, fy1 = (std::min(t.y1, ty0 + th - 1) - ty0) / F;
+      const bool one = fx0 == fx1 && fy0 == fy1;
       for (int fy = fy0; fy <= fy1; ++fy)
-        for (int fx = fx0; fx <= fx1; ++fx) fine[static_cast<size_t>(fy * nfx + fx)].push_back(&t);
+        for (int fx = fx0; fx <= fx1; ++fx) {
+          const int px0 = tx0 + fx * F, py0 = ty0 + fy * F;
+          if (!one && !t.splat &&
+              missesPixels(t, std::max(t.x0, px0), std::min(t.x1, px0 + F - 1), std::max(t.y0, py0),
+                           std::min(t.y1, py0 + F - 1)))
+            continue;
+          fine[static_cast<size_t>(fy * nfx + fx)].push_back(&t);
+        }
     }
     // The fine tiles are tasks too (nested in the coarse tile's task), so that the two cores
     // share the work of a crowded coarse tile (where the light's ghosts pile up) instead of one

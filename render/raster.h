@@ -53,8 +53,9 @@ struct SensorMapping {
 };
 
 // Builds the triangles of a traced grid. `cell_flux` = E_in × the beam cross-section of one
-// grid cell (spacing² · |d_z|); `weight` the colour weight of this wavelength. Quads with a dead
-// corner are skipped; so are quads whose four corners all lie outside the ghost (r_rel > 1 or
+// grid cell (spacing² · |d_z|); `weight` the colour weight of this wavelength. Quads with two or
+// more dead corners are skipped, a quad with one gives the triangle of its three live corners
+// (when not refined); so are quads whose four corners all lie outside the ghost (r_rel > 1 or
 // |(u, v)| > 1), as in Bodonyi & Kunkli §4.1. Appends to `out`.
 // When `refine` is given, quads across a discontinuous edge — a dead corner next to a valid one,
 // r_rel crossing 1 with a jump of more than kRefineJump within the quad (rays turning grazing),

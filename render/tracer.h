@@ -42,6 +42,7 @@ class ReflectanceTables {
 struct CompiledEvent {
   double z = 0.0;          // vertex position
   double radius = 0.0;     // 0 = flat
+  double inv_radius = 0.0; // 1 / radius (0 when flat): the unit normal by multiplication
   double inv_semi = 0.0;   // 1 / semi-aperture (r_rel)
   EventKind kind = EventKind::kRefract;
   double eta = 1.0;        // n_before / n_after (refraction)
