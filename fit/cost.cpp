@@ -118,7 +118,7 @@ const FrameData& FramePyramid::level(int factor) const {
 
 // ── Bounds ────────────────────────────────────────────────────────────────────────────────────
 
-model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double scale) {
+model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double intensity_limit) {
   using namespace model::param;
   const model::ParameterLayout layout{channels};
   model::ParameterBounds b = model::parameterBounds(index, channels);
@@ -130,7 +130,7 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   if (index == kMx) clamp(-size.width, 2.0 * size.width);
   else if (index == kMy) clamp(-size.height, 2.0 * size.height);
   else if (index == kL || index == kR || index == kH) clamp(0.5, diag);
-  else if (index >= layout.ib(0) && index < layout.fi()) clamp(0, 20 * scale);
+  else if (index >= layout.ib(0) && index < layout.fi()) clamp(0, intensity_limit);
   else if (index == layout.fi() || index == layout.fo()) clamp(0.3, diag);
   return b;
 }
@@ -199,6 +199,15 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
   for (const auto& g : seeds)
     for (int c = 0; c < channels_; ++c) scale = std::max({scale, g.border[c], g.inside[c]});
   scale_ = std::max({scale, 3 * frame.noise_sigma, 1e-12});
+  double data_peak = 0;
+  std::vector<cv::Mat> planes;
+  cv::split(target_, planes);
+  for (const cv::Mat& plane : planes) {
+    double peak = 0;
+    cv::minMaxLoc(plane, nullptr, &peak, nullptr, nullptr, data_valid_);
+    data_peak = std::max(data_peak, peak);
+  }
+  intensity_limit_ = 20 * std::max({data_peak, 3 * frame.noise_sigma, 1e-12});
 
   if (options.prior_fraction > 0)
     for (const auto& g : seeds) {

@@ -153,6 +153,11 @@ class GroupCost {
   int factor() const { return frame_.factor; }
   const model::ViewTransform& view() const { return view_; }
   double scale() const { return scale_; }
+  // The largest intensity a ghost of this group may take: 20× the brightest valid pixel of the
+  // region (at least 3 noise σ). Not the seeds' peak: where a ghost's deep inside lies beyond the
+  // frame its Ii is barely seen, and a bound that follows the seed let it grow 20× per frame of a
+  // track (Heliar ghost 21: Ii from 3e-4 to 47 over 1.2°, the model's disc white in every view).
+  double intensityLimit() const { return intensity_limit_; }
   double lossScale() const { return options_.loss_scale; }
   // The capture's size (full resolution).
   cv::Size imageSize() const { return image_size_; }
@@ -200,6 +205,7 @@ class GroupCost {
   cv::Rect region_;        // in the image
   cv::Rect grown_;         // region grown by the filter radius (may leave the image)
   double scale_ = 1;
+  double intensity_limit_ = 1;
   std::vector<cv::Point> samples_;
   cv::Mat target_, target_edge_;  // over region
   cv::Mat data_valid_, edge_valid_;
@@ -217,8 +223,8 @@ class GroupCost {
 };
 
 // The extra bounds a fitter uses on top of model::parameterBounds: lengths and fall-offs within
-// the image's diagonal, the centre within one image size of the frame, intensities up to 20× the
-// region scale.
-model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double scale);
+// the image's diagonal, the centre within one image size of the frame, intensities up to
+// `intensity_limit` (GroupCost::intensityLimit).
+model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double intensity_limit);
 
 }  // namespace flarekit::fit
