@@ -180,15 +180,16 @@ int autoDegree(const std::vector<double>& a, const std::vector<double>& v) {
 }  // namespace
 
 model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, const model::CaptureInfo& info,
-                                  int channels, int degree) {
+                                  int channels, int degree, double range_margin_deg,
+                                  double capture_min_deg, double capture_max_deg) {
   model::FlareModel m;
   m.capture = info;
   m.channels = channels;
   for (const auto& t : tracks) {
     model::GhostTrack g;
     g.id = t.id;
-    g.angle_min_deg = t.angles_deg.front();
-    g.angle_max_deg = t.angles_deg.back();
+    g.angle_min_deg = std::max(capture_min_deg, std::min(t.angles_deg.front(), t.angles_deg.front() - range_margin_deg));
+    g.angle_max_deg = std::min(capture_max_deg, std::max(t.angles_deg.back(), t.angles_deg.back() + range_margin_deg));
     const int count = model::parameterCount(channels);
     for (int k = 0; k < count; ++k) {
       std::vector<double> v;
@@ -676,8 +677,13 @@ class CaptureFitter {
     }
     if (result.tracks.empty())
       throw InputError(stack_.source.string(), "no ghost found in any frame: nothing to fit");
+    // Half the spacing of the fitted frames (the median step: holdout doubles it).
+    std::vector<double> steps;
+    for (int pos = 1; pos < static_cast<int>(positions_.size()); ++pos) steps.push_back(angle(pos) - angle(pos - 1));
+    const double margin = steps.empty() ? 0.0 : 0.5 * medianOf(steps);
     result.model = buildFlareModel(result.tracks, stack_.info, stack_.channels,
-                                   options_.auto_degree ? -1 : options_.degree);
+                                   options_.auto_degree ? -1 : options_.degree, margin, angle(0),
+                                   angle(static_cast<int>(positions_.size()) - 1));
     for (const auto& [pos, fit] : frame_fits_) result.frames.push_back(fit);
     s.ghosts = static_cast<int>(result.tracks.size());
     s.detections = detections_;

@@ -139,9 +139,15 @@ model::Polynomial fitPolynomial(const std::vector<double>& angles_deg,
 
 // The flare model from the tracks: one GhostTrack per track, each parameter a polynomial of the
 // given degree (or auto 1–4 by held-out error when degree < 0). Degrees are lowered where a
-// polynomial would leave the parameter's bounds inside the range.
+// polynomial would leave the parameter's bounds inside the range. Each ghost's angle range reaches
+// `range_margin_deg` beyond its first and last fitted angle, within [capture_min_deg,
+// capture_max_deg]: a ghost fitted in one frame and not in the next ends somewhere between them,
+// and the fitter passes half the spacing of its frames, so that the model has no gaps between
+// tracks that follow each other and covers the frames --holdout odd left out next to a track.
 model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
-                                  const model::CaptureInfo& info, int channels, int degree);
+                                  const model::CaptureInfo& info, int channels, int degree,
+                                  double range_margin_deg = 0, double capture_min_deg = -90,
+                                  double capture_max_deg = 90);
 
 // The frame minus the light's own image (detection.h estimateLightImage, from the frame alone):
 // what the fitter detects and fits ghosts in. The frame itself without a light in it or with

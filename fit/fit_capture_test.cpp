@@ -78,6 +78,37 @@ TEST(BuildFlareModel, PolynomialsStayWithinBoundsAndAutoDegreeIsLowForLinearData
   EXPECT_LE(automatic.ghosts[0].parameters[model::param::kMx].coefficients.size(), 2u);
 }
 
+TEST(BuildFlareModel, RangesReachHalfwayToTheNeighbouringFrames) {
+  // Tracks fitted at 1.0–2.0° and 2.5–3.0° in frames 0.5° apart, the capture 0–3°: the first ghost
+  // exists up to 2.25°, the second from there on, and the capture's end bounds the second.
+  auto track = [](int id, double from, double to) {
+    GhostTrackFit t;
+    t.id = id;
+    for (double a = from; a <= to + 1e-9; a += 0.5) {
+      model::GhostParameters g;
+      g.center_x = 100 + 10 * a;
+      g.center_y = 60;
+      t.angles_deg.push_back(a);
+      t.fits.push_back(g);
+    }
+    return t;
+  };
+  model::CaptureInfo info;
+  info.camera = info.lens = info.light = "test";
+  info.f_number = info.iso = info.exposure_s = info.pixel_pitch_um = 1;
+  info.angle_step_deg = 0.5;
+  info.image_size = {200, 120};
+  const model::FlareModel m = buildFlareModel({track(0, 1.0, 2.0), track(1, 2.5, 3.0)}, info, 1, 1, 0.25, 0.0, 3.0);
+  std::string error;
+  ASSERT_TRUE(m.IsValid(&error)) << error;
+  EXPECT_DOUBLE_EQ(m.ghosts[0].angle_min_deg, 0.75);
+  EXPECT_DOUBLE_EQ(m.ghosts[0].angle_max_deg, 2.25);
+  EXPECT_DOUBLE_EQ(m.ghosts[1].angle_min_deg, 2.25);
+  EXPECT_DOUBLE_EQ(m.ghosts[1].angle_max_deg, 3.0);
+  // Between the fitted frames the ghost is where its polynomial puts it.
+  EXPECT_NEAR(m.ghosts[0].parameters[model::param::kMx].evaluate(2.2), 122, 1e-9);
+}
+
 TEST(FitCapture, RecoversMovingGhostsInMemory) {
   FrameStack stack;
   stack.size = {160, 100};
