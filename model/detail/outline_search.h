@@ -40,6 +40,20 @@ struct PowerCubic {
   Pair tangent(Pair t) const { return (dp3 * t + dp2) * t + p1; }
   Pair second(Pair t) const { return ddp3 * t + dp2; }
 
+  // The terms of a Newton step on g(t) = |B(t) − p|²/2 for the nearest point to p: f = g′ =
+  // (B − p)·B′, fp = g″ = |B′|² + (B − p)·B″, and speed2 = |B′|², from the pairs (the same bits
+  // as the scalar expressions).
+  struct NewtonTerms {
+    double f, fp, speed2;
+  };
+  NewtonTerms newtonTerms(double t, Pair p) const {
+    const Pair tt = {t, t};
+    const Pair b = point(tt) - p, d = tangent(tt);
+    const Pair bd = b * d, dd = d * d, bdd = b * second(tt);
+    const double speed2 = dd[0] + dd[1];
+    return {bd[0] + bd[1], speed2 + bdd[0] + bdd[1], speed2};
+  }
+
   void finish() {
     p0 = Pair{x0, y0};
     p1 = Pair{x1, y1};
@@ -214,13 +228,7 @@ inline double refineNearest(const PowerCubic& c, double px, double py, double lo
                             int newton_steps, double& d2) {
   const Pair p = {px, py};
   for (int i = 0; i < newton_steps; ++i) {
-    // As pairs: the same bits as c.x(t) - px, c.dx(t), … (see PowerCubic).
-    const Pair tt = {t, t};
-    const Pair b = c.point(tt) - p, d = c.tangent(tt);
-    const Pair bd = b * d, dd = d * d, bdd = b * c.second(tt);
-    const double f = bd[0] + bd[1];
-    const double speed2 = dd[0] + dd[1];
-    const double fp = speed2 + bdd[0] + bdd[1];
+    const auto [f, fp, speed2] = c.newtonTerms(t, p);
     if (f > 0)
       hi = t;
     else if (f < 0)
@@ -524,13 +532,7 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   const double speed2_floor = s.speed2_floor;
   for (int i = 0; i < 12; ++i) {
     const PowerCubic& seg = s.seg[w];
-    // x, y and their derivatives as pairs (the same bits as seg.x(t) - px, seg.dx(t), …).
-    const Pair tt = {t, t};
-    const Pair b = seg.point(tt) - p, d = seg.tangent(tt);
-    const Pair bd = b * d, dd = d * d, bdd = b * seg.second(tt);
-    const double f = bd[0] + bd[1];
-    const double speed2 = dd[0] + dd[1];
-    const double fp = speed2 + bdd[0] + bdd[1];
+    const auto [f, fp, speed2] = seg.newtonTerms(t, p);
     // Not in the basin of a minimum, or B′ ≈ 0 (a corner of a Cl = 0 or Cr = 0 outline).
     if (!(fp > 0) || !(speed2 > speed2_floor)) return Certificate::kNotConverged;
     double next = t - f / fp;
