@@ -6,6 +6,7 @@
 #include <tbb/global_control.h>
 
 #include "app/commands.h"
+#include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/log.h"
 #include "fit/evaluation.h"
@@ -106,6 +107,7 @@ void registerFit(CLI::App& app) {
     options.detection.light_symmetry = o->light_symmetry;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
+    checkWritable(o->out);  // before minutes of fitting, not after
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, options.threads);
     fit::FrameStack stack = loadStack(o->stack);
     fit::FitResult result = fit::fitCapture(stack, options);

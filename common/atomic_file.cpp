@@ -44,8 +44,7 @@ fs::path temporaryNameFor(const fs::path& path) {
 
 }  // namespace
 
-void writeFileAtomically(const fs::path& path,
-                         const std::function<void(const fs::path& temporary)>& write) {
+void checkWritable(const fs::path& path) {
   fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
   std::error_code ec;
   if (!fs::is_directory(folder, ec))
@@ -56,17 +55,23 @@ void writeFileAtomically(const fs::path& path,
                        " is not writable (" + errnoText() + ")");
   if (fs::is_directory(path, ec))
     throw RuntimeError("cannot write " + path.string() + ": it is a folder");
+}
 
+void writeFileAtomically(const fs::path& path,
+                         const std::function<void(const fs::path& temporary)>& write) {
+  checkWritable(path);
+  const fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
   fs::path temporary = temporaryNameFor(path.parent_path().empty() ? fs::path(".") / path : path);
   try {
     write(temporary);
-    if (!fs::exists(temporary, ec))
+    if (std::error_code ec; !fs::exists(temporary, ec))
       throw RuntimeError("writing " + path.string() + " produced no file");
     syncPath(temporary, false);
     if (::rename(temporary.c_str(), path.c_str()) != 0)
       throw RuntimeError("cannot rename " + temporary.string() + " to " + path.string() + ": " +
                          errnoText());
   } catch (...) {
+    std::error_code ec;
     fs::remove(temporary, ec);
     throw;
   }

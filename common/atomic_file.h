@@ -10,6 +10,11 @@
 
 namespace flarekit {
 
+// Throws RuntimeError (the same lines writeFileAtomically gives) when `path` could not be written:
+// its folder is missing or not writable, or `path` is a folder. Long commands call it before their
+// work, so a mistyped --out fails at once and not after minutes of fitting.
+void checkWritable(const std::filesystem::path& path);
+
 // Writes `path` atomically. `write` receives the temporary path (same folder, same extension, so
 // writers that choose the format from the extension, such as cv::imwrite, work) and must create
 // the file there. If `write` throws, the temporary file is removed, `path` is untouched and the

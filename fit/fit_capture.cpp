@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <sstream>
@@ -72,35 +73,87 @@ std::string FitSummary::BriefReport() const {
 
 // ── Polynomials ───────────────────────────────────────────────────────────────────────────────
 
-model::Polynomial fitPolynomial(const std::vector<double>& angles, const std::vector<double>& values,
-                                int degree) {
+namespace {
+
+// A polynomial in the centred, scaled variable t = (θ − t0) / scale, solved there for conditioning.
+struct CentredPolynomial {
+  Eigen::VectorXd a;
+  double t0 = 0, scale = 1;
+  double evaluate(double angle) const {
+    const double t = (angle - t0) / scale;
+    double v = 0;
+    for (int k = static_cast<int>(a.size()) - 1; k >= 0; --k) v = v * t + a(k);
+    return v;
+  }
+};
+
+// Weighted least squares (weights empty: all 1) of `degree`, lowered to what the points allow.
+CentredPolynomial solveCentred(const std::vector<double>& angles, const std::vector<double>& values,
+                               const std::vector<double>& weights, int degree) {
   const int n = static_cast<int>(angles.size());
-  if (n == 0) return {{0.0}};
+  CentredPolynomial p;
   degree = std::clamp(degree, 0, n - 1);
-  const double t0 = std::accumulate(angles.begin(), angles.end(), 0.0) / n;
-  double scale = 0;
-  for (double a : angles) scale = std::max(scale, std::abs(a - t0));
-  if (scale <= 0) scale = 1;
+  p.t0 = std::accumulate(angles.begin(), angles.end(), 0.0) / n;
+  p.scale = 0;
+  for (double a : angles) p.scale = std::max(p.scale, std::abs(a - p.t0));
+  if (p.scale <= 0) p.scale = 1;
   Eigen::MatrixXd A(n, degree + 1);
   Eigen::VectorXd b(n);
   for (int i = 0; i < n; ++i) {
-    const double t = (angles[i] - t0) / scale;
-    double p = 1;
-    for (int k = 0; k <= degree; ++k, p *= t) A(i, k) = p;
-    b(i) = values[i];
+    const double t = (angles[i] - p.t0) / p.scale;
+    const double w = weights.empty() ? 1.0 : std::sqrt(weights[i]);
+    double power = 1;
+    for (int k = 0; k <= degree; ++k, power *= t) A(i, k) = w * power;
+    b(i) = w * values[i];
   }
-  const Eigen::VectorXd a = A.colPivHouseholderQr().solve(b);
+  p.a = A.colPivHouseholderQr().solve(b);
+  return p;
+}
+
+}  // namespace
+
+model::Polynomial fitPolynomial(const std::vector<double>& angles, const std::vector<double>& values,
+                                int degree) {
+  if (angles.empty()) return {{0.0}};
+  const CentredPolynomial centred = solveCentred(angles, values, {}, degree);
   // Expand Σ a_k ((θ − t0)/s)^k into powers of θ.
-  std::vector<double> c(degree + 1, 0.0);
-  for (int k = 0; k <= degree; ++k) {
-    const double ak = a(k) / std::pow(scale, k);
+  const int d = static_cast<int>(centred.a.size()) - 1;
+  std::vector<double> c(d + 1, 0.0);
+  for (int k = 0; k <= d; ++k) {
+    const double ak = centred.a(k) / std::pow(centred.scale, k);
     double binom = 1;  // C(k, j)
     for (int j = 0; j <= k; ++j) {
-      c[j] += ak * binom * std::pow(-t0, k - j);
+      c[j] += ak * binom * std::pow(-centred.t0, k - j);
       binom = binom * (k - j) / (j + 1);
     }
   }
   return {c};
+}
+
+std::vector<bool> polynomialInliers(const std::vector<double>& angles,
+                                    const std::vector<double>& values, int degree) {
+  const int n = static_cast<int>(angles.size());
+  std::vector<bool> inlier(n, true);
+  // Too few frames to tell a spike from the curve.
+  if (n < degree + 3) return inlier;
+  std::vector<double> magnitudes;
+  for (double v : values) magnitudes.push_back(std::abs(v));
+  // Below this a residual is rounding, not evidence: 1e-3 of the parameter's typical size.
+  const double floor = 1e-3 * medianOf(magnitudes) + 1e-12;
+  // Least absolute deviations by iteratively reweighted least squares: unlike least squares, the
+  // curve is not pulled towards a single wild value, whatever its size.
+  std::vector<double> weights(n, 1.0), residuals(n, 0.0);
+  for (int iteration = 0; iteration < 30; ++iteration) {
+    const CentredPolynomial p = solveCentred(angles, values, weights, degree);
+    for (int i = 0; i < n; ++i) {
+      residuals[i] = std::abs(values[i] - p.evaluate(angles[i]));
+      weights[i] = 1.0 / std::max(residuals[i], floor);
+    }
+  }
+  // Frames beyond 4 robust σ (MAD) of that curve are spikes.
+  const double limit = std::max(4 * 1.4826 * medianOf(residuals), 10 * floor);
+  for (int i = 0; i < n; ++i) inlier[i] = residuals[i] <= limit;
+  return inlier;
 }
 
 GhostParameters extrapolate(const std::vector<double>& angles, const std::vector<GhostParameters>& fits,
@@ -192,22 +245,35 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
     g.angle_max_deg = std::min(capture_max_deg, std::max(t.angles_deg.back(), t.angles_deg.back() + range_margin_deg));
     const int count = model::parameterCount(channels);
     for (int k = 0; k < count; ++k) {
-      std::vector<double> v;
-      for (const auto& f : t.fits) v.push_back(model::toParameterVector(f)[k]);
-      int d = degree < 0 ? autoDegree(t.angles_deg, v) : degree;
-      model::Polynomial p = fitPolynomial(t.angles_deg, v, d);
+      std::vector<double> all;
+      for (const auto& f : t.fits) all.push_back(model::toParameterVector(f)[k]);
+      // Frames where the fit jumped away from its neighbours for a frame (into the light or a
+      // neighbouring ghost) are left out: one Heliar frame's Ii 700× its neighbours' set a
+      // ghost's brightness over its whole range.
+      const std::vector<bool> inlier =
+          polynomialInliers(t.angles_deg, all, degree < 0 ? 2 : degree);
+      std::vector<double> a, v;
+      for (size_t i = 0; i < all.size(); ++i)
+        if (inlier[i]) {
+          a.push_back(t.angles_deg[i]);
+          v.push_back(all[i]);
+        }
+      int d = degree < 0 ? autoDegree(a, v) : degree;
+      model::Polynomial p = fitPolynomial(a, v, d);
       // Lower the degree until the polynomial stays within the parameter's bounds over the
       // range (degree 0, the mean of in-bounds values, always does).
       while (!polynomialWithinBounds(p, k, channels, g.angle_min_deg, g.angle_max_deg) && d > 0)
-        p = fitPolynomial(t.angles_deg, v, --d);
-      // A constant at a bound (fits that ran into it) is moved a hair inside, where the model
-      // file's check accepts it whatever its rounding.
+        p = fitPolynomial(a, v, --d);
       if (d == 0) {
+        // The constant is the median: a short track too wild for a curve (three Heliar frames
+        // with Ib 8e-5, 0.0075 and 0.043 and fall-offs of 332, 3 and 18 px) is not summarised
+        // by a mean that pairs the brightest border with the widest glow.
+        // A constant at a bound (fits that ran into it) is moved a hair inside, where the model
+        // file's check accepts it whatever its rounding.
         const auto b = model::parameterBounds(k, channels);
         const double lo = b.lower + 1e-6 * std::max(1.0, std::abs(b.lower));
         const double hi = b.upper >= model::kUnbounded ? b.upper : b.upper - 1e-6 * std::max(1.0, std::abs(b.upper));
-        p.coefficients.resize(1);
-        p.coefficients[0] = std::clamp(p.coefficients[0], lo, hi);
+        p.coefficients = {std::clamp(medianOf(v), lo, hi)};
       }
       g.parameters.push_back(p);
     }
@@ -229,6 +295,7 @@ struct Track {
   std::map<int, GhostParameters> fits;     // by position in the fitted frame list
   bool ended_high = false, ended_low = false;
   std::string end_high = "last frame", end_low = "first frame";
+  int merged_with = -1;  // the track this one ran onto in the backward sweep (the same ghost)
 };
 
 struct SolveStats {
@@ -441,10 +508,9 @@ class CaptureFitter {
       }
       // Backward: a ghost extended onto another one (the same ghost found twice) stops.
       if (!forward && !had) {
-        bool duplicate = false;
-        for (size_t j = 0; j < ghosts.size(); ++j)
-          if (j != i && sameGhost(ghosts[i], ghosts[j])) duplicate = true;
-        if (duplicate) {
+        for (size_t j = 0; j < ghosts.size() && t.merged_with < 0; ++j)
+          if (j != i && sameGhost(ghosts[i], ghosts[j])) t.merged_with = ids[j];
+        if (t.merged_with >= 0) {
           t.ended_low = true;
           t.end_low = "merged with another track";
           continue;
@@ -610,7 +676,37 @@ class CaptureFitter {
     throw std::logic_error("unknown track");
   }
 
+  // A track that ran backward onto another one found the same ghost twice: the two become one
+  // track, with the other's frames where this one has none. Kept apart, the other (often two
+  // frames, detected just below) is dropped as short and the frame where they met is fitted by
+  // neither: the Heliar veil at 10.5° was a gap in the model between two tracks.
+  void joinMergedTracks() {
+    for (bool joined = true; joined;) {
+      joined = false;
+      for (auto& t : tracks_) {
+        if (t.merged_with < 0) continue;
+        auto other = std::find_if(tracks_.begin(), tracks_.end(),
+                                  [&](const Track& o) { return o.id == t.merged_with; });
+        t.merged_with = -1;
+        if (other == tracks_.end() || other->id == t.id) continue;
+        const int lowest = t.fits.empty() ? std::numeric_limits<int>::max() : t.fits.begin()->first;
+        for (const auto& [pos, g] : other->fits) t.fits.emplace(pos, g);  // keeps t's where both
+        if (!other->fits.empty() && other->fits.begin()->first < lowest) {
+          t.ended_low = other->ended_low;
+          t.end_low = other->end_low;
+        }
+        t.merged_with = other->merged_with;
+        for (auto& o : tracks_)
+          if (o.merged_with == other->id) o.merged_with = t.id;
+        tracks_.erase(other);
+        joined = true;
+        break;  // the erase moved the tracks: start over
+      }
+    }
+  }
+
   FitResult finish(double seconds) {
+    joinMergedTracks();
     FitResult result;
     FitSummary& s = result.summary;
     s.optimizer = optimizerName(options_.solver.optimizer);

@@ -137,9 +137,16 @@ FitResult fitCapture(const FrameStack& stack, const FitOptions& options);
 model::Polynomial fitPolynomial(const std::vector<double>& angles_deg,
                                 const std::vector<double>& values, int degree);
 
+// Which of (angles, values) a polynomial of `degree` should pass through: all but the spikes, the
+// values beyond 4 robust σ of a least-absolute-deviations fit (a frame whose fit jumped into the
+// light or a neighbouring ghost). All of them when there are fewer than degree + 3.
+std::vector<bool> polynomialInliers(const std::vector<double>& angles_deg,
+                                    const std::vector<double>& values, int degree);
+
 // The flare model from the tracks: one GhostTrack per track, each parameter a polynomial of the
-// given degree (or auto 1–4 by held-out error when degree < 0). Degrees are lowered where a
-// polynomial would leave the parameter's bounds inside the range. Each ghost's angle range reaches
+// given degree (or auto 1–4 by held-out error when degree < 0) through the track's fits but its
+// spikes (polynomialInliers). Degrees are lowered where a polynomial would leave the parameter's
+// bounds inside the range. Each ghost's angle range reaches
 // `range_margin_deg` beyond its first and last fitted angle, within [capture_min_deg,
 // capture_max_deg]: a ghost fitted in one frame and not in the next ends somewhere between them,
 // and the fitter passes half the spacing of its frames, so that the model has no gaps between

@@ -34,6 +34,36 @@ TEST(FitPolynomial, ReproducesAQuadraticInDegrees) {
   EXPECT_EQ(fitPolynomial({1.0}, {4.0}, 2).coefficients.size(), 1u);
 }
 
+TEST(PolynomialInliers, LeaveOutOneWildFrameAndNothingElse) {
+  std::vector<double> a, v;
+  for (int i = 0; i < 9; ++i) {
+    a.push_back(0.5 * i);
+    v.push_back(2e-4 + 1e-5 * i - 3e-6 * i * i + (i % 2 ? 2e-6 : -2e-6));  // a noisy quadratic
+  }
+  EXPECT_EQ(polynomialInliers(a, v, 2), std::vector<bool>(9, true));
+  v[1] = 0.17;  // one frame's fit went into the light
+  std::vector<bool> expected(9, true);
+  expected[1] = false;
+  EXPECT_EQ(polynomialInliers(a, v, 2), expected);
+  // Through the model: the ghost's brightness follows the other eight frames.
+  GhostTrackFit t;
+  for (int i = 0; i < 9; ++i) {
+    model::GhostParameters g;
+    g.center_x = 100 + 3 * i;
+    g.inside = {v[i], 0, 0};
+    t.angles_deg.push_back(a[i]);
+    t.fits.push_back(g);
+  }
+  model::CaptureInfo info;
+  info.image_size = {320, 214};
+  const model::FlareModel m = buildFlareModel({t}, info, 1, 2);
+  const auto at = m.ghostsAt(0.5);
+  ASSERT_EQ(at.size(), 1u);
+  EXPECT_NEAR(at[0].parameters.inside[0], 2e-4 + 1e-5 - 3e-6, 5e-6);
+  // Too few frames to tell: all kept.
+  EXPECT_EQ(polynomialInliers({0, 1, 2, 3}, {1, 1, 9, 1}, 2), std::vector<bool>(4, true));
+}
+
 TEST(Extrapolate, FollowsALinearTrack) {
   std::vector<double> a;
   std::vector<model::GhostParameters> fits;

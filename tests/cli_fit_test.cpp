@@ -139,6 +139,11 @@ TEST(CliFit, BadInputGivesOneLineAndExitTwo) {
   r = runFlarekit({"fit", (dir / "capture").string(), "--out", (dir / "m.json").string(),
                    "--optimizer", "newton"});
   EXPECT_EQ(r.exit_code, 2);
+  // A model file in a folder that does not exist: an I/O failure, said before any fitting.
+  r = runFlarekit({"fit", (dir / "capture").string(), "--out", (dir / "missing/m.json").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(lineCount(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
 }
 
 }  // namespace
