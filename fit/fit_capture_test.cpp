@@ -108,6 +108,51 @@ TEST(BuildFlareModel, PolynomialsStayWithinBoundsAndAutoDegreeIsLowForLinearData
   EXPECT_LE(automatic.ghosts[0].parameters[model::param::kMx].coefficients.size(), 2u);
 }
 
+TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
+  // A ghost whose fits trade border brightness against outer fall-off from frame to frame (a
+  // compact bright border in even frames, a faint wide glow in odd ones): polynomials of Ib, Fo
+  // and Eo each on their own pair the mean border with the mean fall-off. The model's ghost at
+  // each fitted angle must still carry about the fits' light: within 15 % of the mean energy of
+  // the fits around it, and the whole track's within 5 %.
+  GhostTrackFit t;
+  t.id = 1;
+  for (int i = 0; i < 11; ++i) {
+    model::GhostParameters g;
+    g.center_x = 80 + 4 * i;
+    g.center_y = 60;
+    g.left = g.right = g.height = 15;
+    g.inside = {0.01, 0, 0};
+    g.border = {i % 2 ? 0.003 : 0.02, 0, 0};
+    g.outside_falloff = i % 2 ? 40 : 4;
+    g.outside_exponent = i % 2 ? 2 : 1;
+    t.angles_deg.push_back(0.5 * i);
+    t.fits.push_back(g);
+  }
+  model::CaptureInfo info;
+  info.camera = info.lens = info.light = "test";
+  info.f_number = info.iso = info.exposure_s = info.pixel_pitch_um = info.angle_step_deg = 1;
+  info.image_size = {200, 120};
+  const model::FlareModel m = buildFlareModel({t}, info, 1, 2);
+  std::string error;
+  ASSERT_TRUE(m.IsValid(&error)) << error;
+  auto energy = [&](const model::GhostParameters& g) {
+    return cv::sum(model::renderGhosts(std::span(&g, 1), info.image_size, 1))[0];
+  };
+  double fits_total = 0, model_total = 0;
+  std::vector<double> fits;
+  for (const auto& g : t.fits) fits.push_back(energy(g));
+  for (size_t i = 0; i < t.fits.size(); ++i) {
+    const auto at = m.ghostsAt(t.angles_deg[i]);
+    ASSERT_EQ(at.size(), 1u);
+    const double e = energy(at[0].parameters);
+    const double around = i == 0 || i + 1 == fits.size() ? fits[i] : 0.25 * (fits[i - 1] + 2 * fits[i] + fits[i + 1]);
+    if (i > 0 && i + 1 < fits.size()) EXPECT_NEAR(e, around, 0.15 * around) << "at " << t.angles_deg[i] << "°";
+    fits_total += fits[i];
+    model_total += e;
+  }
+  EXPECT_NEAR(model_total, fits_total, 0.05 * fits_total);
+}
+
 TEST(BuildFlareModel, RangesReachHalfwayToTheNeighbouringFrames) {
   // Tracks fitted at 1.0–2.0° and 2.5–3.0° in frames 0.5° apart, the capture 0–3°: the first ghost
   // exists up to 2.25°, the second from there on, and the capture's end bounds the second.
