@@ -63,6 +63,18 @@ void measureGhost(const cv::Mat& image, GhostRecord* g) {
   if (x1 >= 0) g->bbox_px = cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
 }
 
+// Makes *image a zeroed CV_32FC3 image of rows × cols, in its own pixels when it already has that
+// shape and no other cv::Mat shares them (a reused frame costs a memset, not 11 MB of page
+// faults), else in new ones.
+void zeroedImage(int rows, int cols, cv::Mat* image) {
+  const bool reusable = image->rows == rows && image->cols == cols && image->type() == CV_32FC3 &&
+                        image->isContinuous() && image->u != nullptr && image->u->refcount == 1;
+  if (reusable)
+    image->setTo(cv::Scalar::all(0));
+  else
+    *image = cv::Mat(rows, cols, CV_32FC3, cv::Scalar::all(0));
+}
+
 }  // namespace
 
 bool FlareRenderOptions::IsValid(std::string* error) const {
@@ -104,15 +116,37 @@ std::string RenderSummary::BriefReport() const {
   return out.str();
 }
 
+// What a FlareRenderer keeps between renders.
+struct FlareRenderer::Scratch {
+  // Triangles of each (ghost, wavelength): cleared, not freed, so their capacity carries over.
+  std::vector<std::vector<RasterTriangle>> batches;
+  RasterScratch raster;  // accumulation planes per thread
+};
+
+FlareRenderer::FlareRenderer() : scratch_(std::make_unique<Scratch>()) {}
+FlareRenderer::~FlareRenderer() = default;
+FlareRenderer::FlareRenderer(FlareRenderer&&) noexcept = default;
+FlareRenderer& FlareRenderer::operator=(FlareRenderer&&) noexcept = default;
+
 FlareImage renderFlare(const Lens& lens, const LightDirection& light,
                        const FlareRenderOptions& options) {
+  FlareImage out;
+  FlareRenderer().render(lens, light, options, &out);
+  return out;
+}
+
+void FlareRenderer::render(const Lens& lens, const LightDirection& light,
+                           const FlareRenderOptions& options, FlareImage* image) {
   const auto t_start = Clock::now();
   if (!std::isfinite(light.angle_deg) || !std::isfinite(light.roll_deg) ||
       std::abs(light.angle_deg) >= 89.0)
     throw InputError("light angle must be finite and below 89 degrees");
   const RenderSetup setup = prepareRender(lens, light, options);
-  FlareImage out;
-  out.radiance = cv::Mat(options.height_px, options.width_px, CV_32FC3, cv::Scalar::all(0));
+  FlareImage& out = *image;
+  zeroedImage(options.height_px, options.width_px, &out.radiance);
+  out.light_image_px = {0, 0};
+  out.attributes.clear();
+  out.summary = RenderSummary{};
   RenderSummary& summary = out.summary;
   summary.threads = tbb::this_task_arena::max_concurrency();
   summary.wavelengths = static_cast<int>(setup.samples.size());
@@ -136,7 +170,8 @@ FlareImage renderFlare(const Lens& lens, const LightDirection& light,
   summary.ghosts_rendered = static_cast<int>(ghosts.size());
   const int ns = static_cast<int>(setup.samples.size());
 
-  std::vector<std::vector<RasterTriangle>> batches;
+  std::vector<std::vector<RasterTriangle>>& batches = scratch_->batches;
+  for (auto& b : batches) b.clear();
   if (options.method == RenderMethod::kMatrix) {
     const auto t0 = Clock::now();
     addMatrixSprites(setup, ghosts, &out.radiance);
@@ -157,20 +192,24 @@ FlareImage renderFlare(const Lens& lens, const LightDirection& light,
     if (options.method == RenderMethod::kTiled)
       rasterizeTiled(batches, setup.aperture, TileOptions{}, &out.radiance);
     else
-      rasterizePerGhost(batches, setup.aperture, &out.radiance);
+      rasterizePerGhost(batches, setup.aperture, &out.radiance, &scratch_->raster);
     summary.raster_ms = msSince(t1);
   }
 
-  // Ghost records (and layers: each ghost's batches rasterized on their own).
+  // Ghost records (and layers: each ghost's batches rasterized on their own). A record's layer is
+  // kept for reuse; the rest starts afresh.
   out.ghosts.resize(ghosts.size());
   tbb::parallel_for(size_t{0}, ghosts.size(), [&](size_t i) {
     GhostRecord& r = out.ghosts[i];
+    cv::Mat layer = std::move(r.image);
+    r = GhostRecord{};
     r.id = ghosts[i].id;
     r.surface_a = ghosts[i].surface_a;
     r.surface_b = ghosts[i].surface_b;
     r.intensity_estimate = ghosts[i].intensity_estimate;
     if (!options.ghost_layers) return;
-    r.image = cv::Mat(options.height_px, options.width_px, CV_32FC3, cv::Scalar::all(0));
+    r.image = std::move(layer);
+    zeroedImage(options.height_px, options.width_px, &r.image);
     if (options.method == RenderMethod::kMatrix) {
       addMatrixSprite(setup, ghosts[i], &r.image);
     } else {
@@ -248,7 +287,6 @@ FlareImage renderFlare(const Lens& lens, const LightDirection& light,
   a["flarekit.radiometric_unit"] =
       std::string("relative sensor irradiance: E_sensor / E_in (incident irradiance at the entrance pupil)");
   summary.total_ms = msSince(t_start);
-  return out;
 }
 
 ExrImage toExrImage(const FlareImage& image) {

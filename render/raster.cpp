@@ -316,8 +316,8 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
 }
 
 // Adds planar buffers into an interleaved CV_32FC3 image region.
-void addPlanes(const std::vector<float>& r, const std::vector<float>& g, const std::vector<float>& b,
-               int stride, int x0, int y0, int w, int h, cv::Mat* image) {
+void addPlanes(const float* r, const float* g, const float* b, int stride, int x0, int y0, int w,
+               int h, cv::Mat* image) {
   for (int y = 0; y < h; ++y) {
     auto* dst = image->ptr<cv::Vec3f>(y0 + y) + x0;
     const size_t o = static_cast<size_t>(y) * static_cast<size_t>(stride);
@@ -331,7 +331,7 @@ void addPlanes(const std::vector<float>& r, const std::vector<float>& g, const s
 
 // One batch into its own planar buffer over its bounding box, then added to `image`.
 void rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& aperture,
-                    cv::Mat* image, std::mutex* mutex) {
+                    cv::Mat* image, std::mutex* mutex, RasterScratch* scratch) {
   if (tris.empty()) return;
   int x0 = image->cols, y0 = image->rows, x1 = -1, y1 = -1;
   for (const RasterTriangle& t : tris) {
@@ -343,8 +343,17 @@ void rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& ape
   const int w = x1 - x0 + 1, h = y1 - y0 + 1;
   const int stride = (w + kChunk - 1) / kChunk * kChunk;
   const size_t size = static_cast<size_t>(stride) * static_cast<size_t>(h);
-  std::vector<float> r(size, 0.0f), g(size, 0.0f), b(size, 0.0f);
-  const Planes p{r.data(), g.data(), b.data(), stride, x0, y0};
+  std::vector<float> own;
+  float* r;
+  if (scratch) {
+    r = scratch->zeroedPlanes(size);
+  } else {
+    own.assign(3 * size, 0.0f);
+    r = own.data();
+  }
+  float* g = r + size;
+  float* b = g + size;
+  const Planes p{r, g, b, stride, x0, y0};
   for (const RasterTriangle& t : tris) rasterizeInto(t, aperture, t.x0, t.x1, t.y0, t.y1, p);
   if (mutex) {
     std::lock_guard<std::mutex> lock(*mutex);
@@ -355,6 +364,13 @@ void rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& ape
 }
 
 }  // namespace
+
+float* RasterScratch::zeroedPlanes(size_t size) {
+  std::vector<float>& planes = planes_.local();
+  if (planes.size() < 3 * size) planes.resize(3 * size);
+  std::fill(planes.begin(), planes.begin() + static_cast<std::ptrdiff_t>(3 * size), 0.0f);
+  return planes.data();
+}
 
 bool TileOptions::IsValid(std::string* error) const {
   if (fine_tile_px < 1 || coarse_tile_px < fine_tile_px || coarse_tile_px % fine_tile_px != 0) {
@@ -473,17 +489,17 @@ void rasterizeBatches(const std::vector<std::vector<RasterTriangle>>& batches,
                       const std::vector<bool>* keep, const Aperture& aperture, cv::Mat* image) {
   for (size_t b = 0; b < batches.size(); ++b) {
     if (keep && !(*keep)[b]) continue;
-    rasterizeBatch(batches[b], aperture, image, nullptr);
+    rasterizeBatch(batches[b], aperture, image, nullptr, nullptr);
   }
 }
 
 void rasterizePerGhost(const std::vector<std::vector<RasterTriangle>>& batches,
-                       const Aperture& aperture, cv::Mat* image) {
+                       const Aperture& aperture, cv::Mat* image, RasterScratch* scratch) {
   // Hullin's one-ghost-at-a-time pass: each batch into its own buffer over its bounding box,
   // blended additively into the frame (parallel over batches).
   std::mutex mutex;
   tbb::parallel_for(size_t{0}, batches.size(),
-                    [&](size_t b) { rasterizeBatch(batches[b], aperture, image, &mutex); });
+                    [&](size_t b) { rasterizeBatch(batches[b], aperture, image, &mutex, scratch); });
 }
 
 void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
