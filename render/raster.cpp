@@ -235,10 +235,23 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
   alignas(32) float dys[kRows], bases[3][kRows], lo_edges[kRows], hi_edges[kRows];
   alignas(32) int empties[kRows], xss[kRows], xes[kRows], c0s[kRows], chunkss[kRows];
   alignas(32) int fast_begins[kRows], fast_ends[kRows];
+  alignas(32) float trows[kRows];
+  // The triangle's constants in locals: the compiler must otherwise reload them after every store
+  // to a plane (a float store may alias the triangle's floats).
+  const bool tl0 = t.top_left[0], tl1 = t.top_left[1], tl2 = t.top_left[2];
+  const float a0 = t.ea[0], a1 = t.ea[1], a2 = t.ea[2];
+  const float t0 = t.t0, ty = t.ty, tx = t.tx, ox = t.ox;
+  const bool interior = t.interior;
+  // Interior triangles: the top-left test is folded into one threshold per edge (e > 0 is
+  // e ≥ the smallest denormal) so the loop is branch-free and vectorises.
+  const float th0 = tl0 ? 0.0f : std::numeric_limits<float>::denorm_min();
+  const float th1 = tl1 ? 0.0f : std::numeric_limits<float>::denorm_min();
+  const float th2 = tl2 ? 0.0f : std::numeric_limits<float>::denorm_min();
   for (int yb = y0; yb <= y1; yb += kRows) {
     const int nr = std::min(kRows, y1 - yb + 1);
     for (int i = 0; i < nr; ++i) {
       dys[i] = (static_cast<float>(yb + i) + 0.5f) - t.oy;
+      trows[i] = t0 + ty * dys[i];
       lo_edges[i] = -inf;  // the span's ends from the edges alone (not clipped to [x0, x1])
       hi_edges[i] = inf;
       empties[i] = 0;
@@ -301,18 +314,10 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
       const int y = yb + i;
       const float dy = dys[i];
       const size_t row = static_cast<size_t>(y - p.by) * static_cast<size_t>(p.stride);
-      const bool tl0 = t.top_left[0], tl1 = t.top_left[1], tl2 = t.top_left[2];
-      const float a0 = t.ea[0], a1 = t.ea[1], a2 = t.ea[2];
       const float b0 = bases[0][i], b1 = bases[1][i], b2 = bases[2][i];
-      const float trow = t.t0 + t.ty * dy, tx = t.tx, ox = t.ox;
-      if (t.interior) {
-        // A = C = 1: only the interpolated transmission. The top-left test is folded into one
-        // threshold per edge (e > 0 is e ≥ the smallest denormal) so the loop is branch-free and
-        // vectorises.
-        const float th0 = tl0 ? 0.0f : std::numeric_limits<float>::denorm_min();
-        const float th1 = tl1 ? 0.0f : std::numeric_limits<float>::denorm_min();
-        const float th2 = tl2 ? 0.0f : std::numeric_limits<float>::denorm_min();
-        // Pixels of a chunk outside the span [xs, xe] add exactly +0.
+      const float trow = trows[i];
+      if (interior) {
+        // A = C = 1: only the interpolated transmission. Pixels of a chunk outside the span [xs, xe] add exactly +0.
         const int c0 = c0s[i], chunks = chunkss[i];
         const int fast_begin = fast_begins[i], fast_end = fast_ends[i];
         // The chunks as explicit 8-float vectors (GCC vector extensions: one AVX2 vector, two
