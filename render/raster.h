@@ -111,8 +111,11 @@ struct TileOptions {
 
 // Tiled accumulation (Bodonyi & Kunkli §4.3–4.4): all batches' triangles are binned into coarse
 // then fine screen tiles; every pixel sums the triangles of its tile once, in a tile-local
-// buffer, and is written once. Adds to `image`.
+// buffer, and is written once. Adds to `image`; with `overwrite`, writes every pixel instead (the
+// same pixels as adding to a zeroed image, so `image` need not be initialised: no serial pass
+// over the frame to zero it first).
 void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
-                    const Aperture& aperture, const TileOptions& options, cv::Mat* image);
+                    const Aperture& aperture, const TileOptions& options, cv::Mat* image,
+                    bool overwrite = false);
 
 }  // namespace flarekit::render
