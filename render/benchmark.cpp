@@ -51,11 +51,17 @@ RenderBenchmarkResult benchmarkRender(const Lens& lens, const RenderBenchmarkOpt
   r.height_px = options.height_px;
   r.grid_size = options.grid_size;
   std::vector<double> tiled, per_ghost, matrix, trace, raster_tiled, raster_per_ghost, rays_per_s;
+  // Each method renders its frames as a sequence would: one renderer and one image, reused.
+  const RenderMethod methods[] = {RenderMethod::kTiled, RenderMethod::kPerGhost, RenderMethod::kMatrix};
+  FlareRenderer renderers[3];
+  FlareImage images[3];
   // Interleave the methods so that load from other processes hits them alike.
   for (int rep = 0; rep < options.repetitions + 1; ++rep) {
-    for (RenderMethod m : {RenderMethod::kTiled, RenderMethod::kPerGhost, RenderMethod::kMatrix}) {
+    for (int method = 0; method < 3; ++method) {
+      const RenderMethod m = methods[method];
       render.method = m;
-      const FlareImage img = renderFlare(lens, light, render);
+      FlareImage& img = images[method];
+      renderers[method].render(lens, light, render, &img);
       if (rep == 0) {  // warm-up
         r.ghosts = img.summary.ghosts_rendered;
         r.wavelengths = img.summary.wavelengths;

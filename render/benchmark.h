@@ -1,6 +1,7 @@
 #pragma once
 // `flarekit bench render`: times the three rendering methods on one lens (median of repeated
-// renders of the ghosts only — no light source — at one light angle).
+// renders of the ghosts only — no light source — at one light angle, each method rendering its
+// frames with one FlareRenderer into one reused FlareImage, as a capture sequence does).
 
 #include <string>
 

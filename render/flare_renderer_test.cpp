@@ -144,6 +144,46 @@ TEST(FlareRenderer, GhostLayersAddUpToTheImageAndCarryTheirTruth) {
   EXPECT_NEAR(*numericAttribute(back.attributes, "flarekit.angle_deg"), 8.0, 0);
 }
 
+// A FlareRenderer reused for a sequence gives each frame exactly as a fresh render does, and an
+// image handed out before the next render keeps its pixels.
+TEST(FlareRenderer, ReusedRendererAndImageGiveFreshRenders) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderer renderer;
+  FlareImage frame;
+  for (RenderMethod method : {RenderMethod::kTiled, RenderMethod::kMatrix}) {
+    FlareRenderOptions o = small();
+    o.method = method;
+    o.ghost_layers = true;
+    o.max_ghosts = 4;
+    renderer.render(lens, {8, 0}, o, &frame);
+    const cv::Mat handed_out = frame.radiance;  // shares the pixels, as a caller's copy would
+    const cv::Mat layer_out = frame.ghosts.front().image;
+    const cv::Mat kept = handed_out.clone(), kept_layer = layer_out.clone();
+    o.max_ghosts = 3;
+    for (double angle : {3.0, 12.0}) {
+      renderer.render(lens, {angle, 10}, o, &frame);
+      const FlareImage fresh = renderFlare(lens, {angle, 10}, o);
+      EXPECT_EQ(cv::norm(frame.radiance, fresh.radiance, cv::NORM_INF), 0.0) << angle;
+      ASSERT_EQ(frame.ghosts.size(), fresh.ghosts.size());
+      for (size_t i = 0; i < fresh.ghosts.size(); ++i) {
+        EXPECT_EQ(frame.ghosts[i].id, fresh.ghosts[i].id);
+        EXPECT_EQ(frame.ghosts[i].energy, fresh.ghosts[i].energy);
+        EXPECT_EQ(cv::norm(frame.ghosts[i].image, fresh.ghosts[i].image, cv::NORM_INF), 0.0);
+      }
+      EXPECT_EQ(frame.light_image_px, fresh.light_image_px);
+      EXPECT_EQ(frame.attributes.size(), fresh.attributes.size());
+    }
+    EXPECT_EQ(cv::norm(handed_out, kept, cv::NORM_INF), 0.0);
+    EXPECT_EQ(cv::norm(layer_out, kept_layer, cv::NORM_INF), 0.0);
+  }
+  // Another size: new planes of that size.
+  FlareRenderOptions o = small();
+  o.width_px = 100;
+  renderer.render(lens, {5, 0}, o, &frame);
+  EXPECT_EQ(frame.radiance.cols, 100);
+  EXPECT_EQ(cv::norm(frame.radiance, renderFlare(lens, {5, 0}, o).radiance, cv::NORM_INF), 0.0);
+}
+
 TEST(FlareRenderer, CullingOptionsReduceTheGhostList) {
   const Lens lens = lensNamed("heliar_tronnier.json");
   FlareRenderOptions o = small();

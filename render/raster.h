@@ -13,6 +13,7 @@
 #include <vector>
 
 #include <opencv2/core.hpp>
+#include <tbb/enumerable_thread_specific.h>
 
 #include "render/aperture.h"
 #include "render/tracer.h"
@@ -74,10 +75,25 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
 // Value (before the colour weight) of a triangle at pixel centre (x, y), 0 outside it.
 float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, float y);
 
+// Working memory the rasterizers keep between calls when given one (FlareRenderer holds one per
+// renderer): accumulation planes per thread, whose pages stay mapped from frame to frame. A
+// per-ghost buffer covers the ghost's bounding box, up to the whole frame (3.7 MB a plane at
+// 1280×720): allocated afresh per batch, the Heliar's 84 batches took 20–170 k page faults a
+// frame. One call at a time per RasterScratch.
+class RasterScratch {
+ public:
+  // Three zeroed planes of `size` floats for the calling thread (valid until its next call).
+  float* zeroedPlanes(size_t size);
+
+ private:
+  tbb::enumerable_thread_specific<std::vector<float>> planes_;
+};
+
 // Reference: rasterizes one batch after another, each into its own buffer over its bounding
-// box, added to `image` (CV_32FC3, must have the mapping's size). Parallel over batches.
+// box, added to `image` (CV_32FC3, must have the mapping's size). Parallel over batches. The
+// buffers come from `scratch` when given (same image either way).
 void rasterizePerGhost(const std::vector<std::vector<RasterTriangle>>& batches,
-                       const Aperture& aperture, cv::Mat* image);
+                       const Aperture& aperture, cv::Mat* image, RasterScratch* scratch = nullptr);
 
 // Only the batches for which keep[batch] is true (nullptr = all), into `image`, serially.
 void rasterizeBatches(const std::vector<std::vector<RasterTriangle>>& batches,
@@ -95,8 +111,11 @@ struct TileOptions {
 
 // Tiled accumulation (Bodonyi & Kunkli §4.3–4.4): all batches' triangles are binned into coarse
 // then fine screen tiles; every pixel sums the triangles of its tile once, in a tile-local
-// buffer, and is written once. Adds to `image`.
+// buffer, and is written once. Adds to `image`; with `overwrite`, writes every pixel instead (the
+// same pixels as adding to a zeroed image, so `image` need not be initialised: no serial pass
+// over the frame to zero it first).
 void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
-                    const Aperture& aperture, const TileOptions& options, cv::Mat* image);
+                    const Aperture& aperture, const TileOptions& options, cv::Mat* image,
+                    bool overwrite = false);
 
 }  // namespace flarekit::render
