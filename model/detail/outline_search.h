@@ -522,19 +522,25 @@ enum class Certificate {
   kUnproven,     // Newton converged to c (a good upper bound), but it may not be the nearest point
   kNotConverged  // c is unchanged
 };
+//
+// `dt_dx`, when given, receives dt*/dpx at the result (how fast the nearest point moves along the
+// outline as p moves in x; implicit differentiation of f(t, p) = (B − p)·B′ = 0 gives B′x/f′):
+// what the renderer extrapolates the next pixel's start with.
 inline Certificate certifiedNearest(const PreparedShape& s, double px, double py, Candidate& c,
-                                    bool& inside) {
+                                    bool& inside, double* dt_dx = nullptr) {
   int w = c.segment;
   double t = std::clamp(c.t, 0.0, 1.0);
   int clamped = 0;  // consecutive steps stopped at an end of the arc (P_L or P_R)
   bool converged = false;
   const Pair p = {px, py};
   const double speed2_floor = s.speed2_floor;
+  double last_fp = 1;  // f′ of the last Newton step (within 1e-5 px of the result)
   for (int i = 0; i < 12; ++i) {
     const PowerCubic& seg = s.seg[w];
     const auto [f, fp, speed2] = seg.newtonTerms(t, p);
     // Not in the basin of a minimum, or B′ ≈ 0 (a corner of a Cl = 0 or Cr = 0 outline).
     if (!(fp > 0) || !(speed2 > speed2_floor)) return Certificate::kNotConverged;
+    last_fp = fp;
     double next = t - f / fp;
     if (next < 0 || next > 1) {  // (one test on the common path, inside the segment)
       if (next < 0 && w == 1) {  // continue on segment 0 through the joint at P_T
@@ -575,6 +581,8 @@ inline Certificate certifiedNearest(const PreparedShape& s, double px, double py
   const double d = std::sqrt(d2);
   const double tx = tangent[0], ty = tangent[1];
   c = {w, t, d2};
+  // At an end of the arc (P_L or P_R) the minimum stays there as p moves.
+  if (dt_dx) *dt_dx = (t > 0 && t < 1) ? tx / last_fp : 0.0;
   if (d < 1e-7) {  // on the outline: any sign is within 1e-7 px, take the exact one
     inside = insideRelative(s, px, py);
     return Certificate::kCertified;

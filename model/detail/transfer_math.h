@@ -75,12 +75,14 @@ inline constexpr std::array<double, 64> kExp2Table = {
 inline double transferLog(double x) {
   if (!(x >= 2.2250738585072014e-308) || !(x <= 1.7976931348623157e308)) return std::log(x);
   const std::uint64_t bits = std::bit_cast<std::uint64_t>(x);
-  int k = static_cast<int>(bits >> 52) - 1023;
-  double m = std::bit_cast<double>((bits & 0x000FFFFFFFFFFFFFull) | 0x3FF0000000000000ull);  // [1, 2)
-  if (m > 1.4142135623730951) {  // [√½, √2]: ln x has no cancellation near x = 1
-    m *= 0.5;
-    ++k;
-  }
+  // m in [√½, √2] (ln x has no cancellation near x = 1): the mantissa in [1, 2), halved when above
+  // √2 by taking one from its exponent (exact, the same bits as m·0.5). Written without a branch:
+  // for τ spread over (0, 1) the test goes either way at random, and a mispredicted branch cost
+  // more than the whole reduction.
+  const std::uint64_t mantissa = (bits & 0x000FFFFFFFFFFFFFull) | 0x3FF0000000000000ull;  // [1, 2)
+  const std::uint64_t high = mantissa > 0x3FF6A09E667F3BCDull;  // > 1.4142135623730951 (as bits: both positive)
+  const int k = static_cast<int>(bits >> 52) - 1023 + static_cast<int>(high);
+  const double m = std::bit_cast<double>(mantissa - (high << 52));
   const int j = static_cast<int>(m * 128 + 0.5);  // 91 … 181
   const double c = j * (1.0 / 128);
   const double s = (m - c) / (m + c);
