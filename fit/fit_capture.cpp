@@ -414,6 +414,73 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
   return m;
 }
 
+std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostTrackFit> tracks,
+                                                              const model::CaptureInfo& info,
+                                                              int channels, int degree,
+                                                              int min_frames, int first_new_id) {
+  constexpr double kSameGhostIoU = 0.5;
+  auto iou = [](const cv::Rect2d& a, const cv::Rect2d& b) {
+    const double overlap = (a & b).area(), joint = a.area() + b.area() - overlap;
+    return joint > 0 ? overlap / joint : 0.0;
+  };
+  std::vector<GhostTrackFit> done;
+  int next_id = first_new_id;
+  while (!tracks.empty()) {
+    GhostTrackFit t = std::move(tracks.back());
+    tracks.pop_back();
+    const int n = static_cast<int>(t.fits.size());
+    if (n < 2 * min_frames) {
+      done.push_back(std::move(t));
+      continue;
+    }
+    const model::FlareModel m = buildFlareModel({t}, info, channels, degree);
+    bool follows = true;
+    for (int i = 0; i < n && follows; ++i) {
+      const auto at = m.ghostsAt(t.angles_deg[i]);
+      follows = !at.empty() && iou(model::outlineBounds(at[0].parameters), model::outlineBounds(t.fits[i])) >= kSameGhostIoU;
+    }
+    if (follows) {
+      done.push_back(std::move(t));
+      continue;
+    }
+    // Split where consecutive fits differ most (where the track jumped from one ghost to another).
+    int split = min_frames;
+    double worst = 2;
+    for (int i = min_frames; i <= n - min_frames; ++i) {
+      const double v = iou(model::outlineBounds(t.fits[i - 1]), model::outlineBounds(t.fits[i]));
+      if (v < worst) {
+        worst = v;
+        split = i;
+      }
+    }
+    auto piece = [&](int from, int to) {
+      GhostTrackFit p;
+      p.key_frame = t.key_frame;
+      p.end_low = t.end_low;
+      p.end_high = t.end_high;
+      for (int i = from; i < to; ++i) {
+        p.angles_deg.push_back(t.angles_deg[i]);
+        p.fits.push_back(t.fits[i]);
+        if (i < static_cast<int>(t.residual_rms.size())) p.residual_rms.push_back(t.residual_rms[i]);
+        if (i < static_cast<int>(t.peak.size())) p.peak.push_back(t.peak[i]);
+        if (i < static_cast<int>(t.unexplained.size())) p.unexplained.push_back(t.unexplained[i]);
+      }
+      return p;
+    };
+    GhostTrackFit low = piece(0, split), high = piece(split, n);
+    static const std::string kSplit = "split: its polynomials could not follow the track";
+    low.id = t.id;
+    low.end_high = kSplit;
+    high.id = next_id++;
+    high.end_low = kSplit;
+    high.key_frame = -1;  // the caller knows the frame positions
+    tracks.push_back(std::move(high));
+    tracks.push_back(std::move(low));
+  }
+  std::sort(done.begin(), done.end(), [](const GhostTrackFit& a, const GhostTrackFit& b) { return a.id < b.id; });
+  return done;
+}
+
 // ── The capture fitter ────────────────────────────────────────────────────────────────────────
 
 namespace {
@@ -888,7 +955,6 @@ class CaptureFitter {
       out.key_frame = t.key_frame;
       out.end_low = t.end_low;
       out.end_high = t.end_high;
-      int flagged = 0;
       for (const auto& [pos, g] : t.fits) {
         out.angles_deg.push_back(angle(pos));
         out.fits.push_back(g);
@@ -896,21 +962,39 @@ class CaptureFitter {
         const double r = rms[t.id].count(pos) ? rms[t.id][pos] : 0;
         out.residual_rms.push_back(r);
         out.peak.push_back(peak);
-        const bool bad = r > options_.tracking.unexplained_fraction * peak;
-        out.unexplained.push_back(bad);
-        flagged += bad;
+        out.unexplained.push_back(r > options_.tracking.unexplained_fraction * peak);
       }
-      if (flagged > 0) s.unexplained.push_back({t.id, double(flagged) / t.fits.size()});
       result.tracks.push_back(std::move(out));
     }
     if (result.tracks.empty())
       throw InputError(stack_.source.string(), "no ghost found in any frame: nothing to fit");
+    const int degree = options_.auto_degree ? -1 : options_.degree;
+    const int first_new_id = next_id_;
+    result.tracks = splitTracksPolynomialsCannotFollow(std::move(result.tracks), stack_.info, stack_.channels,
+                                                       degree, options_.tracking.min_track_frames,
+                                                       first_new_id);
+    for (auto& t : result.tracks) {
+      if (t.id < first_new_id) continue;
+      next_id_ = std::max(next_id_, t.id + 1);
+      // A split's later piece: its first frame is its key frame, and the frames' records name it.
+      for (size_t i = 0; i < t.angles_deg.size(); ++i)
+        for (auto& [pos, record] : frame_fits_) {
+          if (record.angle_deg != t.angles_deg[i]) continue;
+          if (t.key_frame < 0) t.key_frame = pos;
+          for (size_t j = 0; j < record.ghosts.size(); ++j)
+            if (model::toParameterVector(record.ghosts[j]) == model::toParameterVector(t.fits[i]))
+              record.ghost_ids[j] = t.id;
+        }
+    }
+    for (const auto& t : result.tracks) {
+      const int flagged = static_cast<int>(std::count(t.unexplained.begin(), t.unexplained.end(), true));
+      if (flagged > 0) s.unexplained.push_back({t.id, double(flagged) / t.fits.size()});
+    }
     // Half the spacing of the fitted frames (the median step: holdout doubles it).
     std::vector<double> steps;
     for (int pos = 1; pos < static_cast<int>(positions_.size()); ++pos) steps.push_back(angle(pos) - angle(pos - 1));
     const double margin = steps.empty() ? 0.0 : 0.5 * medianOf(steps);
-    result.model = buildFlareModel(result.tracks, stack_.info, stack_.channels,
-                                   options_.auto_degree ? -1 : options_.degree, margin, angle(0),
+    result.model = buildFlareModel(result.tracks, stack_.info, stack_.channels, degree, margin, angle(0),
                                    angle(static_cast<int>(positions_.size()) - 1));
     for (const auto& [pos, fit] : frame_fits_) result.frames.push_back(fit);
     s.ghosts = static_cast<int>(result.tracks.size());

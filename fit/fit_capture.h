@@ -156,6 +156,18 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   double range_margin_deg = 0, double capture_min_deg = -90,
                                   double capture_max_deg = 90);
 
+// Tracks whose polynomials cannot follow their fits, split until they can: a track whose model
+// ghost (degree as in buildFlareModel) at one of its fitted angles is not the same ghost as the
+// fit there (outline boxes overlapping by IoU < 0.5) is cut where consecutive fits differ most,
+// each piece keeping ≥ min_frames frames; tracks shorter than 2 × min_frames are kept whole. The
+// later piece gets a new id (from first_new_id on) and key_frame −1 (the caller sets it). A track
+// that jumped from one ghost onto another (a Heliar ghost beside the light at 5° and a flat wide
+// ellipse at 12.6° in one track) otherwise became one polynomial describing neither.
+std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostTrackFit> tracks,
+                                                              const model::CaptureInfo& info,
+                                                              int channels, int degree,
+                                                              int min_frames, int first_new_id);
+
 // The frame minus the light's own image (detection.h estimateLightImage, from the frame alone):
 // what the fitter detects and fits ghosts in. The frame itself without a light in it or with
 // options.light_symmetry off.

@@ -153,6 +153,41 @@ TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
   EXPECT_NEAR(model_total, fits_total, 0.05 * fits_total);
 }
 
+TEST(SplitTracks, ATrackThatJumpsToAnotherGhostBecomesTwo) {
+  // Frames 0–7 follow a small ghost moving right; frames 8–15 a large one elsewhere (the track
+  // jumped). One quadratic per parameter describes neither, so the track is cut between 7 and 8.
+  GhostTrackFit t;
+  t.id = 3;
+  t.key_frame = 2;
+  for (int i = 0; i < 16; ++i) {
+    model::GhostParameters g;
+    const bool small = i < 8;
+    g.center_x = small ? 40 + 2 * i : 150 - 3 * i;
+    g.center_y = 60;
+    g.left = g.right = g.height = small ? 8 : 45;
+    g.inside = {0.01, 0, 0};
+    t.angles_deg.push_back(0.5 * i);
+    t.fits.push_back(g);
+    t.unexplained.push_back(false);
+  }
+  model::CaptureInfo info;
+  info.image_size = {200, 120};
+  const auto split = splitTracksPolynomialsCannotFollow({t}, info, 1, 2, 3, 10);
+  ASSERT_EQ(split.size(), 2u);
+  EXPECT_EQ(split[0].id, 3);
+  EXPECT_EQ(split[0].key_frame, 2);
+  EXPECT_EQ(split[0].angles_deg.back(), 3.5);
+  EXPECT_EQ(split[1].id, 10);
+  EXPECT_EQ(split[1].key_frame, -1);
+  EXPECT_EQ(split[1].angles_deg.front(), 4.0);
+  EXPECT_EQ(split[1].unexplained.size(), 8u);
+  // A track the polynomials follow stays whole.
+  GhostTrackFit smooth = t;
+  for (int i = 0; i < 16; ++i) smooth.fits[i] = t.fits[i % 8];
+  for (int i = 8; i < 16; ++i) smooth.fits[i].center_x = 40 + 2 * i;
+  EXPECT_EQ(splitTracksPolynomialsCannotFollow({smooth}, info, 1, 2, 3, 10).size(), 1u);
+}
+
 TEST(BuildFlareModel, RangesReachHalfwayToTheNeighbouringFrames) {
   // Tracks fitted at 1.0–2.0° and 2.5–3.0° in frames 0.5° apart, the capture 0–3°: the first ghost
   // exists up to 2.25°, the second from there on, and the capture's end bounds the second.
