@@ -87,16 +87,22 @@ struct CentredPolynomial {
   }
 };
 
+// The centred variable for `angles` (not empty): t0 their mean, scale their largest distance from it.
+CentredPolynomial centredVariable(const std::vector<double>& angles) {
+  CentredPolynomial p;
+  p.t0 = std::accumulate(angles.begin(), angles.end(), 0.0) / static_cast<double>(angles.size());
+  p.scale = 0;
+  for (double a : angles) p.scale = std::max(p.scale, std::abs(a - p.t0));
+  if (p.scale <= 0) p.scale = 1;
+  return p;
+}
+
 // Weighted least squares (weights empty: all 1) of `degree`, lowered to what the points allow.
 CentredPolynomial solveCentred(const std::vector<double>& angles, const std::vector<double>& values,
                                const std::vector<double>& weights, int degree) {
   const int n = static_cast<int>(angles.size());
-  CentredPolynomial p;
+  CentredPolynomial p = centredVariable(angles);
   degree = std::clamp(degree, 0, n - 1);
-  p.t0 = std::accumulate(angles.begin(), angles.end(), 0.0) / n;
-  p.scale = 0;
-  for (double a : angles) p.scale = std::max(p.scale, std::abs(a - p.t0));
-  if (p.scale <= 0) p.scale = 1;
   Eigen::MatrixXd A(n, degree + 1);
   Eigen::VectorXd b(n);
   for (int i = 0; i < n; ++i) {
@@ -233,6 +239,13 @@ int autoDegree(const std::vector<double>& a, const std::vector<double>& v) {
   return best;
 }
 
+// Intersection over union of two ghosts' outline bounding boxes (0 when both are empty).
+double outlineIoU(const GhostParameters& a, const GhostParameters& b) {
+  const cv::Rect2d box_a = model::outlineBounds(a), box_b = model::outlineBounds(b);
+  const double overlap = (box_a & box_b).area(), joint = box_a.area() + box_b.area() - overlap;
+  return joint > 0 ? overlap / joint : 0.0;
+}
+
 // The ghost's parameters at θ from its polynomials, within bounds.
 GhostParameters evaluateTrack(const model::GhostTrack& g, int channels, double angle) {
   std::vector<double> v;
@@ -290,7 +303,7 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
   for (int d = std::min(degree, static_cast<int>(frames.size()) - 1); d >= 0; --d) {
     // Unknowns: a_k of Ib and b_k of Ii in the centred variable, the same for every channel's
     // design; one right-hand side per channel.
-    CentredPolynomial basis = solveCentred(angles, std::vector<double>(angles.size(), 0.0), {}, d);
+    const CentredPolynomial basis = centredVariable(angles);
     const int n = 2 * (d + 1);
     Eigen::MatrixXd normal = Eigen::MatrixXd::Zero(n, n);
     Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(n, channels);
@@ -388,7 +401,7 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
       int d = degree < 0 ? autoDegree(a, v) : degree;
       model::Polynomial p = fitPolynomial(a, v, d);
       // Lower the degree until the polynomial stays within the parameter's bounds over the
-      // range (degree 0, the mean of in-bounds values, always does).
+      // range (degree 0, a constant clamped into them, always does).
       while (!polynomialWithinBounds(p, k, channels, g.angle_min_deg, g.angle_max_deg) && d > 0)
         p = fitPolynomial(a, v, --d);
       if (d == 0) {
@@ -419,10 +432,6 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
                                                               int channels, int degree,
                                                               int min_frames, int first_new_id) {
   constexpr double kSameGhostIoU = 0.5;
-  auto iou = [](const cv::Rect2d& a, const cv::Rect2d& b) {
-    const double overlap = (a & b).area(), joint = a.area() + b.area() - overlap;
-    return joint > 0 ? overlap / joint : 0.0;
-  };
   std::vector<GhostTrackFit> done;
   int next_id = first_new_id;
   while (!tracks.empty()) {
@@ -437,7 +446,7 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
     bool follows = true;
     for (int i = 0; i < n && follows; ++i) {
       const auto at = m.ghostsAt(t.angles_deg[i]);
-      follows = !at.empty() && iou(model::outlineBounds(at[0].parameters), model::outlineBounds(t.fits[i])) >= kSameGhostIoU;
+      follows = !at.empty() && outlineIoU(at[0].parameters, t.fits[i]) >= kSameGhostIoU;
     }
     if (follows) {
       done.push_back(std::move(t));
@@ -447,7 +456,7 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
     int split = min_frames;
     double worst = 2;
     for (int i = min_frames; i <= n - min_frames; ++i) {
-      const double v = iou(model::outlineBounds(t.fits[i - 1]), model::outlineBounds(t.fits[i]));
+      const double v = outlineIoU(t.fits[i - 1], t.fits[i]);
       if (v < worst) {
         worst = v;
         split = i;
@@ -751,10 +760,7 @@ class CaptureFitter {
   // discs, radii within 23 %). Centre distance alone missed a ghost found twice beside the light,
   // once seeded round and once asymmetric (Heliar 4°: centres 16 px apart, outlines 4–6 px).
   bool sameGhost(const GhostParameters& a, const GhostParameters& b) const {
-    const cv::Rect2d box_a = model::outlineBounds(a), box_b = model::outlineBounds(b);
-    const double overlap = (box_a & box_b).area();
-    const double joint = box_a.area() + box_b.area() - overlap;
-    return joint > 0 && overlap >= 0.6 * joint;
+    return outlineIoU(a, b) >= 0.6;
   }
 
   // Detection runs on a level of about 160 000 pixels (the blobs it seeds are refined at once).
