@@ -76,8 +76,10 @@ class RenderScene : public SceneProvider {
     if (!cached_ || angle_deg != angle_ || f_number != f_number_) {
       render::FlareRenderOptions options = options_;
       options.f_number = f_number;
-      // θ > 0 moves the light's image to −x (shared/DESIGN.md): the head's angle is θ.
-      image_ = render::renderFlare(lens_, render::LightDirection{angle_deg, 0.0}, options);
+      // θ > 0 moves the light's image to −x (shared/DESIGN.md): the head's angle is θ. One
+      // renderer for the whole capture: its frame buffers and triangle lists are reused.
+      cached_ = false;
+      renderer_.render(lens_, render::LightDirection{angle_deg, 0.0}, options, &image_);
       angle_ = angle_deg;
       f_number_ = f_number;
       cached_ = true;
@@ -91,6 +93,7 @@ class RenderScene : public SceneProvider {
   double pitch_um_ = 0;
   bool cached_ = false;
   double angle_ = 0, f_number_ = 0;
+  render::FlareRenderer renderer_;
   render::FlareImage image_;
 };
 
