@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <numbers>
 
 #include <nlohmann/json.hpp>
@@ -295,6 +297,49 @@ TEST(Report, IsOneSelfContainedPage) {
   EXPECT_EQ(html.find("http://"), html.find("http://www.w3.org/2000/svg"));  // no external resources
   EXPECT_EQ(html.find("https://"), std::string::npos);
   EXPECT_EQ(html.find("<script"), std::string::npos);
+}
+
+TEST(Report, MapLabelsNeitherOverlapNorLeaveThePage) {
+  // Two lights 0.3° and 3° apart (their labels would print over each other), and one beyond the
+  // model's range on the map's right rim (its label would run off the page).
+  SeverityMap map;
+  map.max_angle_deg = 20;
+  map.angles_deg = {5, 15};
+  map.rolls_deg = {90, 270};
+  map.values = {{1, 2}, {3, 4}};
+  std::vector<LightPrediction> lights(3);
+  const double angles[] = {5, 5.3, 48}, rolls[] = {200, 203, 180};
+  const char* names[] = {"key spot left", "key spot right", "flood (off-stage)"};
+  for (int i = 0; i < 3; ++i) {
+    lights[i].name = names[i];
+    lights[i].rank = i + 1;
+    lights[i].ghost_count = i < 2 ? 1 : 0;
+    lights[i].geometry.angle_deg = angles[i];
+    lights[i].geometry.roll_deg = rolls[i];
+    lights[i].geometry.status = i < 2 ? LightStatus::kInRange : LightStatus::kOutOfRange;
+  }
+  const int width = 640;
+  const std::string svg = polarMapSvg(map, lights, width);
+  // Each label's box as the SVG places it: anchor, position, and at most 7 px a character (bold
+  // 11 px sans-serif) by 13 px.
+  std::vector<cv::Rect2d> boxes;
+  for (size_t at = svg.find("font-weight=\"bold\">"); at != std::string::npos;
+       at = svg.find("font-weight=\"bold\">", at + 1)) {
+    const size_t start = svg.rfind("<text ", at);
+    double x = 0, y = 0;
+    char anchor[8] = {};
+    ASSERT_EQ(std::sscanf(svg.c_str() + start, "<text x=\"%lf\" y=\"%lf\" text-anchor=\"%7[a-z]\"", &x, &y, anchor), 3);
+    const size_t text = at + std::strlen("font-weight=\"bold\">");
+    const std::string label = svg.substr(text, svg.find('<', text) - text);
+    const double w = 7.0 * static_cast<double>(label.size());  // ASCII names here
+    boxes.emplace_back(std::string(anchor) == "end" ? x - w : x, y - 11, w, 13);
+  }
+  ASSERT_EQ(boxes.size(), 3u) << svg;
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    EXPECT_GE(boxes[i].x, 0) << i;
+    EXPECT_LE(boxes[i].x + boxes[i].width, width) << i;
+    for (size_t j = 0; j < i; ++j) EXPECT_EQ((boxes[i] & boxes[j]).area(), 0) << i << " over " << j;
+  }
 }
 
 TEST(Report, Base64OfKnownStrings) {

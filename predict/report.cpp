@@ -63,6 +63,13 @@ std::string shortName(const std::string& name) {
   return name.substr(0, cut) + "…";
 }
 
+// Characters (UTF-8 code points) of a string.
+size_t codePoints(const std::string& s) {
+  return static_cast<size_t>(std::count_if(s.begin(), s.end(), [](char c) {
+    return (static_cast<unsigned char>(c) & 0xC0) != 0x80;
+  }));
+}
+
 std::string rgb(const cv::Vec3b& c) { return cv::format("rgb(%d,%d,%d)", c[0], c[1], c[2]); }
 
 std::string pngDataUri(const cv::Mat& linear) {
@@ -173,18 +180,36 @@ std::string polarMapSvg(const SeverityMap& map, const std::vector<LightPredictio
     o << cv::format("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\" dominant-baseline=\"middle\" fill=\"#333\">φ %.0f°</text>\n",
                     l.x, l.y, phi);
   }
-  // The scene's lights.
+  // The scene's lights. Labels are placed one after the other (most severe first); one that would
+  // overlap a label already placed moves down a line, and one that would leave the page turns to
+  // the other side of its mark. Label sizes are estimated from the font (bold 11 px: ≤ 7 px a
+  // character), which is all an SVG writer knows without a renderer.
+  std::vector<cv::Rect2d> placed;
   for (const auto& p : lights) {
     if (p.geometry.status == LightStatus::kBehindCamera) continue;
     const bool inside = p.geometry.angle_deg <= map.max_angle_deg;
     const double rho = radius * std::min(p.geometry.angle_deg, map.max_angle_deg * 1.04) / map.max_angle_deg;
     const cv::Point2d q = polar(cx, cy, rho, p.geometry.roll_deg);
+    const std::string label = std::to_string(p.rank) + ". " + shortName(p.name);
+    const double label_w = 7.0 * static_cast<double>(codePoints(label)), line_h = 13;
+    // Inside the disc labels point inwards, on the rim outwards, so they stay on the page.
+    bool to_left = (q.x > cx) == inside;
+    if (!to_left && q.x + 8 + label_w > w - 2) to_left = true;
+    if (to_left && q.x - 8 - label_w < 2) to_left = false;
+    const double x = to_left ? q.x - 8 : q.x + 8;
+    double y = q.y - 8;
+    auto box = [&](double at_y) { return cv::Rect2d(to_left ? x - label_w : x, at_y - 11, label_w, line_h); };
+    for (int tries = 0; tries < 6; ++tries) {
+      const cv::Rect2d b = box(y);
+      if (std::none_of(placed.begin(), placed.end(), [&](const cv::Rect2d& o) { return (o & b).area() > 0; })) break;
+      y += line_h;
+    }
+    placed.push_back(box(y));
     o << cv::format("<g class=\"light-marker\"><circle cx=\"%.1f\" cy=\"%.1f\" r=\"6\" fill=\"%s\" stroke=\"#0cf\" stroke-width=\"2\"/>",
                     q.x, q.y, p.ghost_count > 0 ? "#fff" : "none")
       << cv::format("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"%s\" fill=\"#0cf\" stroke=\"#000\" "
                     "stroke-width=\"3\" paint-order=\"stroke\" font-weight=\"bold\">",
-                    // Inside the disc labels point inwards, on the rim outwards, so they stay on the page.
-                    (q.x > cx) == inside ? q.x - 8 : q.x + 8, q.y - 8, (q.x > cx) == inside ? "end" : "start")
+                    x, y, to_left ? "end" : "start")
       << p.rank << ". " << escape(shortName(p.name)) << "<title>" << escape(p.name) << ": θ "
       << fmt(p.geometry.angle_deg, "%.1f") << "°, φ " << fmt(p.geometry.roll_deg, "%.0f") << "°, "
       << toString(p.geometry.status) << "</title></text></g>\n";
