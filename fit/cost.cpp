@@ -301,6 +301,16 @@ double GroupCost::evaluate(std::span<const model::GhostParameters> input, bool j
         }
       }
     }
+    // Raw planes for sampleJacobian, which Ceres calls once per pixel and ghost.
+    auto planes = [&](const std::vector<std::vector<cv::Mat>>& images) {
+      std::vector<std::vector<JacobianPlane>> out(ghost_count_, std::vector<JacobianPlane>(parameters_per_ghost_));
+      for (int g = 0; g < ghost_count_; ++g)
+        for (int k = 0; k < parameters_per_ghost_; ++k)
+          if (const cv::Mat& m = images[g][k]; !m.empty()) out[g][k] = {m.ptr<float>(), m.step1()};
+      return out;
+    };
+    jacobian_data_planes_ = planes(jacobian_data_);
+    jacobian_edge_planes_ = planes(jacobian_edge_);
   }
   return totalCost();
 }
@@ -324,24 +334,17 @@ void GroupCost::sampleJacobian(int sample, int ghost, double* jacobian) const {
   const cv::Rect& data_rect = jacobian_rect_[ghost][0];
   const cv::Rect& edge_rect = jacobian_rect_[ghost][1];
   const bool edge_ok = edge_valid_.at<uchar>(p) != 0;
-  if (data_rect.contains(p)) {
-    const cv::Point q = p - data_rect.tl();
+  auto copy = [&](const std::vector<JacobianPlane>& planes, cv::Point q, int first_row) {
+    const size_t offset = static_cast<size_t>(q.x) * channels_;
     for (int k = 0; k < n; ++k) {
-      const cv::Mat& m = jacobian_data_[ghost][k];
-      if (m.empty()) continue;
-      const float* v = m.ptr<float>(q.y) + q.x * channels_;
-      for (int c = 0; c < channels_; ++c) jacobian[c * n + k] = v[c];
+      const JacobianPlane& plane = planes[k];
+      if (plane.data == nullptr) continue;
+      const float* v = plane.data + static_cast<size_t>(q.y) * plane.step + offset;
+      for (int c = 0; c < channels_; ++c) jacobian[(first_row + c) * n + k] = v[c];
     }
-  }
-  if (edge_ok && edge_rect.contains(p)) {
-    const cv::Point q = p - edge_rect.tl();
-    for (int k = 0; k < n; ++k) {
-      const cv::Mat& m = jacobian_edge_[ghost][k];
-      if (m.empty()) continue;
-      const float* v = m.ptr<float>(q.y) + q.x * channels_;
-      for (int c = 0; c < channels_; ++c) jacobian[(channels_ + c) * n + k] = v[c];
-    }
-  }
+  };
+  if (data_rect.contains(p)) copy(jacobian_data_planes_[ghost], p - data_rect.tl(), 0);
+  if (edge_ok && edge_rect.contains(p)) copy(jacobian_edge_planes_[ghost], p - edge_rect.tl(), channels_);
 }
 
 void GroupCost::priorResiduals(int ghost, const double* parameters, double* residuals,

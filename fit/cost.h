@@ -214,6 +214,11 @@ class GroupCost {
   // Jacobian images [ghost][parameter], normalised; empty Mat = zero.
   std::vector<std::vector<cv::Mat>> jacobian_data_, jacobian_edge_;
   std::vector<std::vector<cv::Rect>> jacobian_rect_;  // where each image is non-zero (region coords)
+  struct JacobianPlane {
+    const float* data = nullptr;  // null: the image is zero
+    size_t step = 0;              // floats per row
+  };
+  std::vector<std::vector<JacobianPlane>> jacobian_data_planes_, jacobian_edge_planes_;  // [ghost][parameter]
   bool has_jacobians_ = false;
   long long evaluations_ = 0;
   // Shape prior on P_L = Mx − L, P_R = Mx + R, My, h, Cl, Cr.
