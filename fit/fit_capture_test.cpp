@@ -9,6 +9,16 @@
 namespace flarekit::fit {
 namespace {
 
+// The capture of the hand-made tracks below: a valid model file's metadata, 200 × 120 pixels.
+model::CaptureInfo testCapture(double angle_step_deg = 1) {
+  model::CaptureInfo info;
+  info.camera = info.lens = info.light = "test";
+  info.f_number = info.iso = info.exposure_s = info.pixel_pitch_um = 1;
+  info.angle_step_deg = angle_step_deg;
+  info.image_size = {200, 120};
+  return info;
+}
+
 TEST(FitOptions, DefaultsAreValid) {
   std::string error;
   EXPECT_TRUE(FitOptions{}.IsValid(&error)) << error;
@@ -54,8 +64,7 @@ TEST(PolynomialInliers, LeaveOutOneWildFrameAndNothingElse) {
     t.angles_deg.push_back(a[i]);
     t.fits.push_back(g);
   }
-  model::CaptureInfo info;
-  info.image_size = {320, 214};
+  const model::CaptureInfo info = testCapture();
   const model::FlareModel m = buildFlareModel({t}, info, 1, 2);
   const auto at = m.ghostsAt(0.5);
   ASSERT_EQ(at.size(), 1u);
@@ -94,10 +103,7 @@ TEST(BuildFlareModel, PolynomialsStayWithinBoundsAndAutoDegreeIsLowForLinearData
     t.peak.push_back(1);
     t.unexplained.push_back(false);
   }
-  model::CaptureInfo info;
-  info.camera = info.lens = info.light = "test";
-  info.f_number = info.iso = info.exposure_s = info.pixel_pitch_um = info.angle_step_deg = 1;
-  info.image_size = {200, 120};
+  const model::CaptureInfo info = testCapture();
   for (int degree : {2, -1}) {
     const model::FlareModel m = buildFlareModel({t}, info, 1, degree);
     std::string error;
@@ -128,10 +134,7 @@ TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
     t.angles_deg.push_back(0.5 * i);
     t.fits.push_back(g);
   }
-  model::CaptureInfo info;
-  info.camera = info.lens = info.light = "test";
-  info.f_number = info.iso = info.exposure_s = info.pixel_pitch_um = info.angle_step_deg = 1;
-  info.image_size = {200, 120};
+  const model::CaptureInfo info = testCapture();
   const model::FlareModel m = buildFlareModel({t}, info, 1, 2);
   std::string error;
   ASSERT_TRUE(m.IsValid(&error)) << error;
@@ -170,8 +173,7 @@ TEST(SplitTracks, ATrackThatJumpsToAnotherGhostBecomesTwo) {
     t.fits.push_back(g);
     t.unexplained.push_back(false);
   }
-  model::CaptureInfo info;
-  info.image_size = {200, 120};
+  const model::CaptureInfo info = testCapture();
   const auto split = splitTracksPolynomialsCannotFollow({t}, info, 1, 2, 3, 10);
   ASSERT_EQ(split.size(), 2u);
   EXPECT_EQ(split[0].id, 3);
@@ -203,11 +205,7 @@ TEST(BuildFlareModel, RangesReachHalfwayToTheNeighbouringFrames) {
     }
     return t;
   };
-  model::CaptureInfo info;
-  info.camera = info.lens = info.light = "test";
-  info.f_number = info.iso = info.exposure_s = info.pixel_pitch_um = 1;
-  info.angle_step_deg = 0.5;
-  info.image_size = {200, 120};
+  const model::CaptureInfo info = testCapture(0.5);
   const model::FlareModel m = buildFlareModel({track(0, 1.0, 2.0), track(1, 2.5, 3.0)}, info, 1, 1, 0.25, 0.0, 3.0);
   std::string error;
   ASSERT_TRUE(m.IsValid(&error)) << error;
