@@ -494,6 +494,11 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
 
 namespace {
 
+// Detection runs on a level of about 160 000 pixels (the blobs it seeds are refined at once).
+int detectionLevel(cv::Size size) {
+  return std::max(1, static_cast<int>(std::floor(std::sqrt(size.area() / 160000.0))));
+}
+
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -763,10 +768,7 @@ class CaptureFitter {
     return outlineIoU(a, b) >= 0.6;
   }
 
-  // Detection runs on a level of about 160 000 pixels (the blobs it seeds are refined at once).
-  int detectionFactor() const {
-    return std::max(1, static_cast<int>(std::floor(std::sqrt(stack_.size.area() / 160000.0))));
-  }
+  int detectionFactor() const { return detectionLevel(stack_.size); }
 
   // The residual (luminance) of the frame minus `ghosts` at level `level.factor`.
   cv::Mat residualAt(const FrameData& level, const std::vector<GhostParameters>& ghosts) const {
@@ -1037,14 +1039,10 @@ cv::Mat frameWithoutLight(const Frame& frame, const LightImage& light, double no
   return frame.image - estimateLightImage(frame.image, frame.valid, light, noise_sigma, options);
 }
 
-std::vector<GhostParameters> detectSeeds(const Frame& frame, int channels, const FitOptions& options) {
-  EdgeFilter edge(options.cost);
-  const double noise_sigma = estimateNoiseSigma(frame.image, frame.valid);
-  const LightImage light_full = findLight(luminance(frame.image), frame.valid, noise_sigma, options.detection);
-  FramePyramid pyramid(frameWithoutLight(frame, light_full, noise_sigma, options.detection), frame.valid,
-                       edge, noise_sigma);
-  const int kd = std::max(1, static_cast<int>(std::floor(std::sqrt(frame.image.size().area() / 160000.0))));
-  const FrameData& level = pyramid.level(kd);
+std::vector<GhostParameters> detectSeeds(const FramePyramid& data, const LightImage& light_full,
+                                         int channels, const FitOptions& options) {
+  const int kd = detectionLevel(data.size());
+  const FrameData& level = data.level(kd);
   const cv::Mat lum = luminance(level.image);
   const LightImage light = light_full.atLevel(kd);
   std::vector<GhostParameters> seeds;

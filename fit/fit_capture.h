@@ -176,9 +176,10 @@ cv::Mat frameWithoutLight(const Frame& frame, const LightImage& light, double no
 
 // The seeds detection finds in one frame with nothing modelled yet (brightest first), in the
 // stack's channel count: what the fitter starts new ghosts from (and what `bench fit` starts both
-// optimizers from).
-std::vector<model::GhostParameters> detectSeeds(const Frame& frame, int channels,
-                                                const FitOptions& options);
+// optimizers from). `data`: the frame as the fitter sees it (frameWithoutLight, with the frame's
+// noise σ); `light`: the light found in the frame (findLight).
+std::vector<model::GhostParameters> detectSeeds(const FramePyramid& data, const LightImage& light,
+                                                int channels, const FitOptions& options);
 
 // Seeds every parameter of a ghost at `angle_deg` from a track's last fits (polynomial
 // extrapolation over at most `frames` of them, degree ≤ `degree`).

@@ -149,7 +149,9 @@ TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
     ASSERT_EQ(at.size(), 1u);
     const double e = energy(at[0].parameters);
     const double around = i == 0 || i + 1 == fits.size() ? fits[i] : 0.25 * (fits[i - 1] + 2 * fits[i] + fits[i + 1]);
-    if (i > 0 && i + 1 < fits.size()) EXPECT_NEAR(e, around, 0.15 * around) << "at " << t.angles_deg[i] << "°";
+    if (i > 0 && i + 1 < fits.size()) {
+      EXPECT_NEAR(e, around, 0.15 * around) << "at " << t.angles_deg[i] << "°";
+    }
     fits_total += fits[i];
     model_total += e;
   }

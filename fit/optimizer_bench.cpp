@@ -31,13 +31,13 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
     // Sample inside the range (the ends are where ghosts are hardest to see).
     const int index = std::min(n - 1, static_cast<int>((k + 0.5) * n / options.frames));
     const Frame& frame = stack.frames[index];
-    auto seeds = detectSeeds(frame, stack.channels, options.fit);
-    if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
     // The data the fitter sees: the frame without the light's own image.
     const double noise_sigma = estimateNoiseSigma(frame.image, frame.valid);
     const LightImage light = findLight(luminance(frame.image), frame.valid, noise_sigma, options.fit.detection);
     FramePyramid pyramid(frameWithoutLight(frame, light, noise_sigma, options.fit.detection), frame.valid,
                          edge, noise_sigma);
+    auto seeds = detectSeeds(pyramid, light, stack.channels, options.fit);
+    if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
     for (const auto& seed : seeds) {
       std::vector<model::GhostParameters> one = {seed};
       SolverOptions gd = options.fit.solver;
