@@ -167,6 +167,7 @@ class Session {
   int attempts_ = 0;
   SimulatedCamera* sim_camera_ = nullptr;
   std::string lens_name_;
+  double focal_length_mm_ = 0;  // 0 = unknown
   double pixel_pitch_um_ = 0;
 };
 
@@ -184,6 +185,7 @@ Json Session::newManifest() const {
                {"file", rig_.camera_driver == CameraDriver::kSimulated
                             ? rig_.simulation.lens.string()
                             : std::string()}};
+  if (focal_length_mm_ > 0) m["lens"]["focal_length_mm"] = focal_length_mm_;
   const double white = rig_.sensor.white_level_dn > 0
                            ? rig_.sensor.white_level_dn
                            : std::ldexp(1.0, rig_.sensor.bit_depth) - 1;
@@ -350,6 +352,7 @@ void Session::captureFrame(int index, double angle_deg) {
   meta.lens = lens_name_;
   meta.rig = rig_.name;
   meta.pixel_pitch_um = pixel_pitch_um_;
+  meta.focal_length_mm = focal_length_mm_;
   meta.units = manifest_["image"]["units"].get<std::string>();
   const std::string name = frameName(index);
   Json entry = {{"index", index},
@@ -435,8 +438,11 @@ CaptureSummary Session::run() {
   if (sim_camera_) {
     lens_name_ = sim_camera_->scene().lensName();
     pixel_pitch_um_ = sim_camera_->scene().pixelPitchUm();
+    focal_length_mm_ = sim_camera_->scene().focalLengthMm();
   } else {
+    lens_name_ = rig_.lens.name;
     pixel_pitch_um_ = rig_.sensor.pixel_pitch_um;
+    focal_length_mm_ = rig_.lens.focal_length_mm;
   }
 
   const fs::path manifest_path = out_ / "manifest.json";

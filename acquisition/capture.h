@@ -13,7 +13,8 @@
 //                                  attributes flarekit.angle_deg, flarekit.exposure_s (longest),
 //                                  flarekit.exposures_s, flarekit.iso, flarekit.f_number,
 //                                  flarekit.camera, flarekit.lens, flarekit.rig,
-//                                  flarekit.pixel_pitch_um, flarekit.units, flarekit.cfa
+//                                  flarekit.pixel_pitch_um, flarekit.focal_length_mm (when
+//                                  known), flarekit.units, flarekit.cfa
 //   DIR/truth/frame_NNNN.exr     simulated rigs only: the renderer's noise-free radiance in the
 //                                  frames' units and channels (main layer "Y" or "R","G","B")
 //                                  and one layer per rendered ghost, "ghost.<id>.Y" (or
@@ -29,7 +30,9 @@
 //   rig               {name, file (as given on the command line), head, camera: driver names,
 //                      simulated: bool}
 //   head              description of the rotation head
-//   lens              {name, file}        ("" when the rig does not know its lens)
+//   lens              {name, file, focal_length_mm}  (name and file "" when the rig does not know
+//                      its lens; focal_length_mm, the simulated lens's paraxial EFL or the real
+//                      rig's [lens] focal_length_mm, left out when unknown)
 //   camera            {description, iso, f_number, exposures_s: [...], cfa, black_level_dn,
 //                      white_level_dn, gain_e_per_dn, read_noise_e}
 //   light             description from the rig file

@@ -36,6 +36,7 @@ class SpotScene : public SceneProvider {
   }
   std::string lensName() const override { return "spot"; }
   double pixelPitchUm() const override { return 5; }
+  double focalLengthMm() const override { return 50; }
 };
 
 // Test-local sensor: Poisson electrons (1000 e/s per unit), 4 e/DN, black 100, 12 bit.
@@ -135,6 +136,7 @@ TEST(Capture, WritesFramesTruthAndManifest) {
   EXPECT_EQ(m["image"]["width"], 32);
   EXPECT_EQ(m["image"]["height"], 24);
   EXPECT_EQ(m["darks"].size(), 2u);
+  EXPECT_EQ(m["lens"]["focal_length_mm"], 50);  // the scene's: where its lights image
   EXPECT_TRUE(fs::exists(dir.path() / "cap" / m["frames"][2]["truth_file"].get<std::string>()));
   EXPECT_EQ(m["frames"][2]["raw_files"].size(), 2u);
   // The merged frame agrees with the scene (0.05 background, 3.0 spot) in scene units.

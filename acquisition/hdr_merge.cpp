@@ -327,6 +327,7 @@ ExrImage mergedToExr(const MergeResult& result, const FrameMetadata& metadata) {
   if (!metadata.lens.empty()) a["flarekit.lens"] = metadata.lens;
   if (!metadata.rig.empty()) a["flarekit.rig"] = metadata.rig;
   if (metadata.pixel_pitch_um > 0) a["flarekit.pixel_pitch_um"] = metadata.pixel_pitch_um;
+  if (metadata.focal_length_mm > 0) a["flarekit.focal_length_mm"] = metadata.focal_length_mm;
   a["flarekit.units"] = metadata.units;
   a["flarekit.cfa"] = std::string(cfaName(result.cfa));
   a["flarekit.saturated_count"] = static_cast<int>(std::min<long long>(result.saturated_count, INT32_MAX));

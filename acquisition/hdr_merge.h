@@ -83,6 +83,7 @@ struct FrameMetadata {
   double f_number = 0;                 // flarekit.f_number
   std::string camera, lens, rig;       // flarekit.camera, flarekit.lens, flarekit.rig
   double pixel_pitch_um = 0;           // flarekit.pixel_pitch_um (0 = unknown, omitted)
+  double focal_length_mm = 0;          // flarekit.focal_length_mm (0 = unknown, omitted)
   std::string units = "electrons/s";   // flarekit.units
 };
 

@@ -47,6 +47,7 @@ class RenderScene : public SceneProvider {
       throw InputError(rig.file.string(), "simulation: " + error);
     pitch_um_ = 1000.0 * std::min(sim.sensor_width_mm / sim.width_px,
                                   sim.sensor_height_mm / sim.height_px);
+    focal_length_mm_ = render::paraxialProperties(lens_).efl_mm;
   }
 
   cv::Mat radiance(double angle_deg, double f_number) override {
@@ -70,6 +71,7 @@ class RenderScene : public SceneProvider {
 
   std::string lensName() const override { return lens_.name; }
   double pixelPitchUm() const override { return pitch_um_; }
+  double focalLengthMm() const override { return focal_length_mm_; }
 
  private:
   const render::FlareImage& render(double angle_deg, double f_number) {
@@ -91,6 +93,7 @@ class RenderScene : public SceneProvider {
   render::Lens lens_;
   render::FlareRenderOptions options_;
   double pitch_um_ = 0;
+  double focal_length_mm_ = 0;  // paraxial EFL of the lens
   bool cached_ = false;
   double angle_ = 0, f_number_ = 0;
   render::FlareRenderer renderer_;

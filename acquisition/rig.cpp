@@ -191,6 +191,12 @@ void parseSimulation(const ConfigNode& s, Rig& rig) {
   x.seed = static_cast<uint64_t>(integerIn(s, "seed", 1, 0, INT32_MAX));
 }
 
+void parseLens(const ConfigNode& l, Rig& rig) {
+  l.checkKnownKeys({"name", "focal_length_mm"});
+  rig.lens.name = l.string("name", "");
+  rig.lens.focal_length_mm = nonNegative(l, "focal_length_mm", 0);
+}
+
 void parseFaults(const ConfigNode& f, Rig& rig) {
   f.checkKnownKeys({"camera_transient_probability", "camera_timeout_probability", "timeout_s",
                     "head_transient_probability", "camera_disconnect_after_frames",
@@ -231,8 +237,8 @@ Rig loadRig(const std::filesystem::path& path) {
   ConfigNode root = loadTomlFile(path);
   Rig rig;
   rig.file = path;
-  root.checkKnownKeys({"name", "description", "light", "light_illuminance_lux", "head", "camera", "sensor", "simulation",
-                       "faults", "capture"});
+  root.checkKnownKeys({"name", "description", "light", "light_illuminance_lux", "head", "camera", "sensor", "lens",
+                       "simulation", "faults", "capture"});
   rig.name = root["name"].string();
   if (rig.name.empty()) root["name"].fail("must not be empty");
   rig.description = root.string("description", "");
@@ -243,8 +249,10 @@ Rig loadRig(const std::filesystem::path& path) {
   if (root.has("sensor")) parseSensor(root["sensor"], rig);
   if (rig.camera_driver == CameraDriver::kSimulated) {
     parseSimulation(root["simulation"], rig);
-  } else if (root.has("simulation")) {
-    root["simulation"].fail("only a simulated camera takes a [simulation] section");
+    if (root.has("lens")) root["lens"].fail("a simulated camera's lens is [simulation] lens");
+  } else {
+    if (root.has("simulation")) root["simulation"].fail("only a simulated camera takes a [simulation] section");
+    if (root.has("lens")) parseLens(root["lens"], rig);
   }
   if (root.has("faults")) {
     if (!rig.simulated()) root["faults"].fail("fault injection needs a simulated head and camera");

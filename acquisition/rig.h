@@ -99,6 +99,12 @@ struct SimulationConfig {
   uint64_t seed = 1;
 };
 
+// The lens on a real rig's camera (a simulated rig's lens is its [simulation] prescription).
+struct LensConfig {
+  std::string name;            // recorded in the manifest, frames and flare model
+  double focal_length_mm = 0;  // 0 = unknown; predictions use it to check a scene's camera
+};
+
 struct FaultConfig {
   double camera_transient_probability = 0;  // per capture call
   double camera_timeout_probability = 0;    // per capture call: a timeout (transient)
@@ -135,6 +141,7 @@ struct Rig {
   TicConfig tic;
   Gphoto2Config gphoto2;
   SensorConfig sensor;
+  LensConfig lens;              // only for a real camera
   SimulationConfig simulation;  // only for camera driver "simulated"
   FaultConfig faults;
   CaptureDefaults capture;

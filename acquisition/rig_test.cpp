@@ -25,6 +25,7 @@ TEST(Rig, ShippedRigsLoad) {
   EXPECT_EQ(pi.gpio.step_line, 17);
   EXPECT_EQ(pi.gpio.geometry.microsteps, 16);
   EXPECT_DOUBLE_EQ(pi.gpio.geometry.gear_ratio, 3.0);
+  EXPECT_DOUBLE_EQ(pi.lens.focal_length_mm, 50.0);
   Rig tic = loadRig(kRigs / "tic-eos.toml");
   EXPECT_EQ(tic.head_driver, HeadDriver::kTic);
   Rig sim = loadRig(kRigs / "sim-heliar.toml");
@@ -85,6 +86,11 @@ TEST(Rig, ErrorsNameFileKeyAndProblem) {
   EXPECT_NE(e.find("faults"), std::string::npos) << e;
   e = errorOf("light_illuminance_lux = -5\n" + kGpioRig);
   EXPECT_NE(e.find("light_illuminance_lux"), std::string::npos) << e;
+  e = errorOf(kGpioRig + "[lens]\nfocal_length_mm = -50\n");
+  EXPECT_NE(e.find("lens.focal_length_mm"), std::string::npos) << e;
+  e = errorOf("name = \"x\"\n[head]\ndriver = \"simulated\"\n[camera]\ndriver = \"simulated\"\n"
+              "[simulation]\nlens = \"l.json\"\n[lens]\nfocal_length_mm = 50\n");
+  EXPECT_NE(e.find("[simulation] lens"), std::string::npos) << e;
   // Every message is one line.
   EXPECT_EQ(e.find('\n'), std::string::npos);
 }

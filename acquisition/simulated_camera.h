@@ -33,6 +33,7 @@ class SceneProvider {
   virtual ExrImage truth(double angle_deg, double f_number) = 0;
   virtual std::string lensName() const = 0;
   virtual double pixelPitchUm() const = 0;
+  virtual double focalLengthMm() const = 0;  // where a light at θ images: f·tan θ
 };
 
 // Turns radiance (render units) into a RAW frame: (radiance, exposure_s, iso, seed) → CV_16UC1.

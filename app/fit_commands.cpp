@@ -24,7 +24,7 @@ struct StackArgs {
   std::vector<std::string> inputs;
   std::string angles_csv, angle_pattern, layer;
   std::string camera, lens, light;
-  double f_number = 0, iso = 0, exposure_s = 0, pixel_pitch_um = 0;
+  double f_number = 0, iso = 0, exposure_s = 0, pixel_pitch_um = 0, focal_length_mm = 0;
 };
 
 void addStackOptions(CLI::App* cmd, StackArgs& a) {
@@ -39,6 +39,8 @@ void addStackOptions(CLI::App* cmd, StackArgs& a) {
   cmd->add_option("--iso", a.iso, "EXR stacks: ISO (else from attributes, else 100)");
   cmd->add_option("--exposure-s", a.exposure_s, "EXR stacks: exposure time in s (else from attributes, else 1)");
   cmd->add_option("--pixel-pitch-um", a.pixel_pitch_um, "EXR stacks: pixel pitch in µm (else from attributes, else 1)");
+  cmd->add_option("--focal-length-mm", a.focal_length_mm,
+                  "EXR stacks: the lens's focal length in mm (else from attributes, else unknown)");
 }
 
 fit::FrameStack loadStack(const StackArgs& a) {
@@ -53,6 +55,7 @@ fit::FrameStack loadStack(const StackArgs& a) {
   o.info.iso = a.iso;
   o.info.exposure_s = a.exposure_s;
   o.info.pixel_pitch_um = a.pixel_pitch_um;
+  o.info.focal_length_mm = a.focal_length_mm;
   std::string error;
   if (!o.IsValid(&error)) throw InputError(error);
   std::vector<fs::path> inputs(a.inputs.begin(), a.inputs.end());

@@ -112,7 +112,9 @@ void registerModelInfo(CLI::App& app) {
     const auto& c = m.capture;
     std::cout << o->model << ": flare model, " << m.ghosts.size() << " ghosts, "
               << (m.channels == 3 ? "RGB" : "grey") << "\n"
-              << "  capture: " << c.camera << ", " << c.lens << ", f/" << c.f_number << ", ISO " << c.iso
+              << "  capture: " << c.camera << ", " << c.lens
+              << (c.focal_length_mm > 0 ? " (" + cv::format("%.4g", c.focal_length_mm) + " mm)" : std::string())
+              << ", f/" << c.f_number << ", ISO " << c.iso
               << ", " << c.exposure_s << " s, light " << c.light << ", " << c.image_size.width << "x"
               << c.image_size.height << " px, pitch " << c.pixel_pitch_um << " um, step "
               << c.angle_step_deg << " deg\n";

@@ -108,6 +108,8 @@ bool FrameLoadOptions::IsValid(std::string* error) const {
   if (!angles_csv.empty() && !angle_pattern.empty())
     return fail("give the angles either by --angles-csv or by --angle-pattern, not both");
   if (!(black_threshold >= 0)) return fail("black_threshold must be ≥ 0");
+  if (!(info.focal_length_mm >= 0) || !std::isfinite(info.focal_length_mm))
+    return fail("--focal-length-mm must be > 0");
   return true;
 }
 
@@ -188,7 +190,12 @@ FrameStack loadCapture(const fs::path& folder, const FrameLoadOptions& options) 
     stack.warnings.push_back(w);
   }
   model::CaptureInfo& info = stack.info;
-  if (auto lens = root.find("lens")) info.lens = lens->string("name", "");
+  if (auto lens = root.find("lens")) {
+    info.lens = lens->string("name", "");
+    info.focal_length_mm = lens->number("focal_length_mm", 0);
+    if (!(info.focal_length_mm >= 0) || !std::isfinite(info.focal_length_mm))
+      (*lens)["focal_length_mm"].fail("must be > 0 (or left out when unknown)");
+  }
   if (auto cam = root.find("camera")) {
     info.camera = cam->string("description", "");
     info.iso = cam->number("iso", 0);
@@ -359,6 +366,7 @@ FrameStack loadExrStack(const std::vector<fs::path>& inputs, const FrameLoadOpti
       num("flarekit.iso", info.iso);
       num("flarekit.exposure_s", info.exposure_s);
       num("flarekit.pixel_pitch_um", info.pixel_pitch_um);
+      num("flarekit.focal_length_mm", info.focal_length_mm);
       str("flarekit.camera", info.camera);
       str("flarekit.lens", info.lens);
     }

@@ -38,7 +38,7 @@ CaptureInfo parseCapture(const ConfigNode& c) {
   if (!c.isObject()) c.fail("must be a table");
   c.checkKnownKeys({"camera", "lens", "f_number", "iso", "exposure_s", "light", "image_width",
                     "image_height", "pixel_pitch_um", "angle_step_deg", "light_illuminance_lux",
-                    "clip_level"});
+                    "clip_level", "focal_length_mm"});
   CaptureInfo info;
   info.camera = text(c["camera"]);
   info.lens = text(c["lens"]);
@@ -57,6 +57,7 @@ CaptureInfo parseCapture(const ConfigNode& c) {
   info.angle_step_deg = positiveNumber(c["angle_step_deg"]);
   if (c.has("light_illuminance_lux")) info.light_illuminance_lux = positiveNumber(c["light_illuminance_lux"]);
   if (c.has("clip_level")) info.clip_level = positiveNumber(c["clip_level"]);
+  if (c.has("focal_length_mm")) info.focal_length_mm = positiveNumber(c["focal_length_mm"]);
   return info;
 }
 
@@ -182,8 +183,9 @@ bool FlareModel::IsValid(std::string* error) const {
     return fail("capture: f_number, iso, exposure_s, pixel_pitch_um and angle_step_deg must be positive");
   if (c.image_size.width <= 0 || c.image_size.height <= 0) return fail("capture: image size must be positive");
   if (!(c.light_illuminance_lux >= 0) || !std::isfinite(c.light_illuminance_lux) || !(c.clip_level >= 0) ||
-      !std::isfinite(c.clip_level))
-    return fail("capture: light_illuminance_lux and clip_level must be positive (or 0 = not recorded)");
+      !std::isfinite(c.clip_level) || !(c.focal_length_mm >= 0) || !std::isfinite(c.focal_length_mm))
+    return fail("capture: light_illuminance_lux, clip_level and focal_length_mm must be positive (or 0 = "
+                "not recorded)");
   if (channels != 1 && channels != 3) return fail("channels must be 1 or 3");
   std::set<int> ids;
   for (size_t i = 0; i < ghosts.size(); ++i) {
@@ -213,6 +215,7 @@ nlohmann::json FlareModel::toJson() const {
                   {"angle_step_deg", capture.angle_step_deg}};
   if (capture.light_illuminance_lux > 0) j["capture"]["light_illuminance_lux"] = capture.light_illuminance_lux;
   if (capture.clip_level > 0) j["capture"]["clip_level"] = capture.clip_level;
+  if (capture.focal_length_mm > 0) j["capture"]["focal_length_mm"] = capture.focal_length_mm;
   j["channels"] = channels;
   nlohmann::json list = nlohmann::json::array();
   for (const GhostTrack& g : ghosts) {

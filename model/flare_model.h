@@ -59,6 +59,9 @@ struct CaptureInfo {
   // sensor's white level in the capture's units): prediction divides by it so that its overlays
   // are fractions of the scene camera's white level.
   double clip_level = 0;
+  // the lens's focal length, mm: with the pixel pitch it fixes where a light at θ images (f·tan θ)
+  // and how large the ghosts are, so a prediction can tell a scene camera that differs.
+  double focal_length_mm = 0;
 };
 
 // p(θ) = Σ coefficients[k]·θ^k.

@@ -105,6 +105,7 @@ TEST(FlareModel, FileRoundTripIsExact) {
     if (channels == 3) {  // the optional calibration (one model with it, one without)
       m.capture.light_illuminance_lux = 40.0 / 3.0;
       m.capture.clip_level = 0.006;
+      m.capture.focal_length_mm = 99.2358;
     }
     const auto path = dir / ("model" + std::to_string(channels) + ".json");
     m.save(path);
@@ -119,6 +120,7 @@ TEST(FlareModel, FileRoundTripIsExact) {
     EXPECT_EQ(back.capture.exposure_s, m.capture.exposure_s);
     EXPECT_EQ(back.capture.light_illuminance_lux, m.capture.light_illuminance_lux);
     EXPECT_EQ(back.capture.clip_level, m.capture.clip_level);
+    EXPECT_EQ(back.capture.focal_length_mm, m.capture.focal_length_mm);
     EXPECT_EQ(cv::norm(back.render(3, 10), m.render(3, 10), cv::NORM_INF), 0.0);
   }
 }

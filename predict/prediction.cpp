@@ -104,6 +104,23 @@ bool PredictOptions::IsValid(std::string* error) const {
   return true;
 }
 
+std::string cameraMismatch(const model::FlareModel& m, const Scene& scene, double tolerance) {
+  const auto& c = m.capture;
+  if (!(c.focal_length_mm > 0) || !(c.pixel_pitch_um > 0) || c.image_size.width <= 0) return "";
+  const double capture_width_mm = c.image_size.width * c.pixel_pitch_um * 1e-3;
+  const double capture = c.focal_length_mm / capture_width_mm;
+  const double seen = scene.camera.focal_length_mm / scene.camera.sensor_width_mm;
+  if (std::abs(seen / capture - 1) <= tolerance) return "";
+  auto fov = [](double f_per_width) { return 2 * std::atan(0.5 / f_per_width) * 180 / M_PI; };
+  return cv::format(
+      "%s: the scene camera (%.4g mm on a %.3g mm wide sensor, %.1f° across) does not see as the "
+      "capture's did (%.4g mm on %.3g mm, %.1f°): ghosts are drawn where the capture's lens put them, "
+      "%.2f× the size and offset this camera would show; capture the scene's lens, or give the "
+      "scene the capture's focal length",
+      scene.file.string().c_str(), scene.camera.focal_length_mm, scene.camera.sensor_width_mm, fov(seen),
+      c.focal_length_mm, capture_width_mm, fov(capture), capture / seen);
+}
+
 AngleRange sampledRange(const model::FlareModel& m) {
   if (m.ghosts.empty()) return {0, 0};
   AngleRange r{std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
@@ -259,6 +276,10 @@ PredictionSummary analyze(const model::FlareModel& m, const Scene& scene, const 
   s.image_size = predictionImageSize(m, scene, options.image_width_px);
   s.capture_illuminance_lux = captureIlluminance(m, options, &s.capture_illuminance_source);
   s.overlay_in_white_units = m.capture.clip_level > 0;
+  if (std::string w = cameraMismatch(m, scene); !w.empty()) {
+    logWarning(w);
+    s.warnings.push_back(w);
+  }
   const cv::Mat scene_img = sceneImage(scene, s.image_size);
 
   // Overlay, light by light (Walch 2018 §3.4.1: ghosts scaled by Eq. 2 and added).
@@ -415,6 +436,7 @@ nlohmann::json toJson(const PredictionSummary& s) {
   j["capture_illuminance_source"] = s.capture_illuminance_source;
   j["overlay_units"] = s.overlay_in_white_units ? "fraction of the scene camera's white level" : "capture units";
   j["image_size"] = {s.image_size.width, s.image_size.height};
+  j["warnings"] = s.warnings;
   j["severity_estimator"] = toString(s.map.estimator);
   j["estimators"] = toJson(s.estimators);
   json ratings = json::object();

@@ -110,6 +110,8 @@ struct PredictionSummary {
   SeverityMap map;
   std::vector<TimelinePoint> timeline;   // empty when the scene has no camera path
   std::vector<std::filesystem::path> files;  // written files
+  // What makes the prediction less trustworthy than it looks (cameraMismatch), one line each.
+  std::vector<std::string> warnings;
   double seconds = 0;
   // A paragraph: lights in range / out / behind, the worst light, severity and its percentile.
   std::string BriefReport() const;
@@ -133,6 +135,13 @@ double captureIlluminance(const model::FlareModel& model, const PredictOptions& 
 cv::Mat renderLight(const model::FlareModel& model, double model_angle_deg, double model_roll_deg,
                     double brightness, const cv::Vec3d& color, cv::Size image_size,
                     const model::RenderOptions& options);
+
+// A warning when the scene's camera does not see the scene as the capture's camera saw the rig:
+// the model draws every ghost where the capture's lens put it, at the capture's focal length per
+// sensor width (Walch 2018 §3.4 renders a model of one lens), while the scene camera images a light
+// at θ at its own f·tan θ. Empty when the two agree within `tolerance` (relative) or the model
+// does not record its lens's focal length.
+std::string cameraMismatch(const model::FlareModel& model, const Scene& scene, double tolerance = 0.02);
 
 // The model's sampled range (union of the ghosts' ranges); {0, 0} for a model without ghosts.
 AngleRange sampledRange(const model::FlareModel& model);

@@ -258,6 +258,32 @@ TEST(Prediction, AnalyzeRanksRatesAndMaps) {
   EXPECT_EQ(toJson(r)["lights"].size(), 3u);
 }
 
+// The model draws ghosts at its capture's focal length per sensor width: a scene camera that sees
+// wider or narrower gets one warning line, in the summary and estimators.json; one that sees the
+// same (another sensor, focal length in proportion) or a model without a focal length gets none.
+TEST(Prediction, WarnsWhenTheSceneCameraDoesNotSeeAsTheCaptureDid) {
+  model::FlareModel m = oneGhostModel();  // 300 px × 6 µm: a 1.8 mm wide sensor
+  Scene s = sceneWithLights({{-5, 0}});   // 24 mm on 36 mm
+  s.file = "stage.json";
+  PredictOptions o;
+  o.map_angle_steps = 2;
+  o.map_roll_steps = 2;
+  EXPECT_TRUE(analyze(m, s, o).warnings.empty());  // focal length not recorded: nothing to check
+  m.capture.focal_length_mm = 1.2;                  // 1.2 / 1.8 = 24 / 36
+  EXPECT_EQ(cameraMismatch(m, s), "");
+  EXPECT_TRUE(analyze(m, s, o).warnings.empty());
+  m.capture.focal_length_mm = 1.2 * 1.03;
+  const PredictionSummary r = analyze(m, s, o);
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_NE(r.warnings[0].find("stage.json"), std::string::npos) << r.warnings[0];
+  EXPECT_NE(r.warnings[0].find("24 mm"), std::string::npos) << r.warnings[0];
+  EXPECT_NE(r.warnings[0].find("1.03×"), std::string::npos) << r.warnings[0];
+  EXPECT_EQ(r.warnings[0].find('\n'), std::string::npos);
+  EXPECT_EQ(toJson(r)["warnings"].size(), 1u);
+  m.capture.focal_length_mm = 1.2 * 1.01;  // within the 2 % tolerance
+  EXPECT_EQ(cameraMismatch(m, s), "");
+}
+
 TEST(Prediction, SeverityMapCellEqualsTheLightPlacedThere) {
   // A map cell is the estimator of one light of the map's brightness at that direction: place a
   // scene light at a cell's (θ, φ) and compare.

@@ -275,8 +275,10 @@ std::string reportHtml(const PredictionSummary& s, const model::FlareModel& m, c
        "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
        "th{background:#f2f2f2}td.l,th.l{text-align:left}.row{display:flex;flex-wrap:wrap;gap:24px;align-items:flex-start}"
        "figure{margin:0}figcaption{font-size:12px;color:#555;max-width:640px}.note{font-size:12px;color:#555;max-width:900px}"
-       "tr.none td{color:#888}\n</style></head><body>\n";
+       "tr.none td{color:#888}.warning{background:#fff3cd;border:1px solid #e0b000;padding:6px 10px;max-width:900px}"
+       "\n</style></head><body>\n";
   o << "<h1>Flare prediction: " << escape(s.scene_name) << "</h1>\n";
+  for (const auto& w : s.warnings) o << "<p class=\"warning\">Warning: " << escape(w) << "</p>\n";
   o << "<p id=\"brief\">" << escape(s.BriefReport()) << "</p>\n";
 
   // Images: the composite with the lights marked, and the overlay alone.
@@ -353,7 +355,8 @@ std::string reportHtml(const PredictionSummary& s, const model::FlareModel& m, c
   const auto& c = m.capture;
   o << "<h2>Where this came from</h2>\n<table id=\"provenance\">"
     << "<tr><th class=\"l\">model file</th><td class=\"l\">" << escape(s.model_file.string()) << "</td></tr>"
-    << "<tr><th class=\"l\">capture</th><td class=\"l\">" << escape(c.camera) << ", " << escape(c.lens) << ", f/"
+    << "<tr><th class=\"l\">capture</th><td class=\"l\">" << escape(c.camera) << ", " << escape(c.lens)
+    << (c.focal_length_mm > 0 ? " (" + fmt(c.focal_length_mm, "%.4g") + " mm)" : std::string()) << ", f/"
     << fmt(c.f_number, "%.3g") << ", ISO " << fmt(c.iso, "%.0f") << ", " << fmt(c.exposure_s, "%.4g") << " s, light "
     << escape(c.light) << ", " << c.image_size.width << " x " << c.image_size.height << " px, pitch "
     << fmt(c.pixel_pitch_um, "%.3g") << " µm, step " << fmt(c.angle_step_deg, "%.3g") << "°; capture light l·α = "

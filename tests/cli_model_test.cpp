@@ -111,6 +111,7 @@ TEST(CliModel, BadModelFilesExitTwoWithOneClearLine) {
       {"negative_size", [](auto& j) { j["ghosts"][1]["parameters"]["L"] = {-30}; }, "L"},
       {"negative_image_size", [](auto& j) { j["capture"]["image_height"] = -200; }, "image_height"},
       {"empty_angle_range", [](auto& j) { j["ghosts"][0]["angle_min_deg"] = 50; }, "empty angle range"},
+      {"negative_focal_length", [](auto& j) { j["capture"]["focal_length_mm"] = -50; }, "focal_length_mm"},
   };
   for (const Case& c : cases) {
     nlohmann::json j = good;
