@@ -6,10 +6,13 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
+#include <set>
 #include <sstream>
 
 #include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
+#include <tbb/task_arena.h>
 
 #include "common/error.h"
 #include "common/image.h"
@@ -473,6 +476,7 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
         if (i < static_cast<int>(t.residual_rms.size())) p.residual_rms.push_back(t.residual_rms[i]);
         if (i < static_cast<int>(t.peak.size())) p.peak.push_back(t.peak[i]);
         if (i < static_cast<int>(t.unexplained.size())) p.unexplained.push_back(t.unexplained[i]);
+        if (i < static_cast<int>(t.carried.size())) p.carried.push_back(t.carried[i]);
       }
       return p;
     };
@@ -509,6 +513,7 @@ struct Track {
   bool ended_high = false, ended_low = false;
   std::string end_high = "last frame", end_low = "first frame";
   int merged_with = -1;  // the track this one ran onto in the backward sweep (the same ghost)
+  std::set<int> carried;  // positions where the ghost was carried into the light (carriedInto)
 };
 
 struct SolveStats {
@@ -530,7 +535,6 @@ class CaptureFitter {
     for (int i = 0; i < static_cast<int>(stack.frames.size()); ++i)
       if (!options.holdout_odd || i % 2 == 0) positions_.push_back(i);
     solver_ = options.solver;
-    solver_.threads = options.threads;
   }
 
   FitResult run() {
@@ -567,6 +571,49 @@ class CaptureFitter {
     }
     return extrapolate(a, f, angle(pos), options_.tracking.extrapolation_frames,
                        options_.tracking.extrapolation_degree);
+  }
+
+  // The ghost of track `t` carried into frame `pos`, where it lies in the light's own image: there
+  // S (detection.h estimateLightImage) takes every part of a ghost that is point-symmetric about
+  // the light, and near θ = 0 that is nearly all of it (a ghost's offset from the light shrinks
+  // with θ), so its fit sinks into the noise although the ghost is as bright as a frame before:
+  // on data_synthetic Heliar the brightest ghost (ghost 4 of the truth, peak 0.025, 27 px) lies
+  // 3 px from the light at 0.5° and no track reached below 1.25°, so the model had nothing there
+  // and rated the lights nearest the axis as the least severe. The carried ghost keeps its
+  // shape and brightness of its nearest fit clear of the light and moves its centre towards the
+  // image centre, where every ghost is at θ = 0 (the lens is rotationally symmetric):
+  // c(θ) = c₀ + k·θ, k by least squares over those clear fits (offsets from the optical axis grow
+  // ∝ tan θ ≈ θ near it). The fits beside the light are no template: S took the ghost's side
+  // towards the light from them (a 14 px disc fitted with L = 2 px), and their centres are pulled
+  // away. nullopt when the ghost is not in the light's zone or the track has too few clear fits.
+  std::optional<GhostParameters> carriedInto(const Track& t, int pos) {
+    const LightImage& light = lightOf(pos);
+    if (!light.found) return std::nullopt;
+    auto clear = [&](int p, const GhostParameters& g) {
+      const LightImage& l = lightOf(p);
+      return !l.found || std::hypot(g.center_x - l.center.x, g.center_y - l.center.y) >
+                             std::max({g.left, g.right, g.height}) + l.zone_radius_px;
+    };
+    const cv::Point2d c0(0.5 * stack_.size.width, 0.5 * stack_.size.height);
+    cv::Point2d kt(0, 0);
+    double tt = 0;
+    int n = 0;
+    const GhostParameters* nearest = nullptr;
+    for (const auto& [p, g] : t.fits) {
+      if (t.carried.count(p) || !clear(p, g)) continue;
+      if (!nearest) nearest = &g;
+      kt += angle(p) * (cv::Point2d(g.center_x, g.center_y) - c0);
+      tt += angle(p) * angle(p);
+      if (++n == options_.tracking.extrapolation_frames) break;
+    }
+    if (n < options_.tracking.min_track_frames || !(tt > 0)) return std::nullopt;
+    GhostParameters g = *nearest;
+    const cv::Point2d centre = c0 + (angle(pos) / tt) * kt;
+    g.center_x = centre.x;
+    g.center_y = centre.y;
+    const double reach = std::max({g.left, g.right, g.height}) + light.zone_radius_px;
+    if (std::hypot(g.center_x - light.center.x, g.center_y - light.center.y) > reach) return std::nullopt;
+    return g;
   }
 
   // Why a fitted ghost ends here, or "" when it goes on.
@@ -711,6 +758,15 @@ class CaptureFitter {
           t.ended_high = true;
           t.end_high = reason;
         } else if (!had || t.fits.begin()->first == pos) {
+          std::optional<GhostParameters> carried;
+          if (!had && reason == "sank into the noise") carried = carriedInto(t, pos);
+          if (carried) {
+            t.fits[pos] = *carried;
+            t.carried.insert(pos);
+            kept_ids.push_back(ids[i]);
+            kept.push_back(*carried);
+            continue;
+          }
           t.ended_low = true;
           t.end_low = reason;
           t.fits.erase(pos);
@@ -971,6 +1027,7 @@ class CaptureFitter {
         out.residual_rms.push_back(r);
         out.peak.push_back(peak);
         out.unexplained.push_back(r > options_.tracking.unexplained_fraction * peak);
+        out.carried.push_back(t.carried.count(pos) > 0);
       }
       result.tracks.push_back(std::move(out));
     }
@@ -1065,7 +1122,8 @@ FitResult fitCapture(const FrameStack& stack, const FitOptions& options) {
   if (!options.IsValid(&error)) throw std::invalid_argument("FitOptions: " + error);
   if (stack.frames.empty()) throw InputError(stack.source.string(), "no frames to fit");
   CaptureFitter fitter(stack, options);
-  return fitter.run();
+  tbb::task_arena arena(options.threads);
+  return arena.execute([&] { return fitter.run(); });
 }
 
 }  // namespace flarekit::fit

@@ -67,7 +67,7 @@ struct FitOptions {
   bool auto_degree = false;
   // Fit on every other frame only (frames 0, 2, 4, … in angle order), to evaluate on the others.
   bool holdout_odd = false;
-  // Threads for Ceres and the renderer (≥ 1).
+  // Threads for the model renderer (≥ 1); the fit is the same for any number.
   int threads = 2;
   // Progress on stderr.
   bool progress = true;
@@ -84,6 +84,7 @@ struct GhostTrackFit {
   std::vector<double> residual_rms;           // RMS residual over the ghost's region, per angle
   std::vector<double> peak;                   // max(Ib, Ii) per angle
   std::vector<bool> unexplained;              // residual_rms > unexplained_fraction × peak
+  std::vector<bool> carried;                  // not fitted: carried through the light's image
   std::string end_low, end_high;              // why the track ends at either side
 };
 

@@ -261,5 +261,64 @@ TEST(FitCapture, RecoversMovingGhostsInMemory) {
   EXPECT_FALSE(r.summary.BriefReport().empty());
 }
 
+// Near θ = 0 a ghost is concentric with the light, and the light's point-symmetric estimate S
+// takes it with the halo: its fit sinks into the noise. The fitter carries it from the frames
+// where it stands clear of the light into the light, towards the image centre, as bright as it
+// was, and the report marks those frames as carried.
+TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
+  FrameStack stack;
+  stack.size = {160, 100};
+  stack.channels = 1;
+  stack.info.camera = stack.info.lens = stack.info.light = "test";
+  stack.info.f_number = stack.info.iso = stack.info.exposure_s = stack.info.pixel_pitch_um = 1;
+  stack.info.angle_step_deg = 0.25;
+  stack.info.image_size = stack.size;
+  cv::theRNG().state = 7;
+  const cv::Point2d centre(80, 50);
+  for (int i = 0; i < 13; ++i) {
+    const double theta = 0.25 * i;
+    // The light moves to −x, the ghost to +x: 30 px apart per degree.
+    const cv::Point2d light = centre - cv::Point2d(20 * theta, 0);
+    model::GhostParameters g;
+    g.center_x = centre.x + 10 * theta;
+    g.center_y = centre.y;
+    g.left = g.right = 14;
+    g.height = 13;
+    g.border = {0.8, 0, 0};
+    g.inside = {0.3, 0, 0};
+    std::vector<model::GhostParameters> one = {g};
+    Frame f;
+    f.index = i;
+    f.angle_deg = theta;
+    f.image = model::renderGhosts(one, stack.size, 1);
+    f.valid = cv::Mat(stack.size, CV_8U, cv::Scalar(255));
+    for (int y = 0; y < stack.size.height; ++y)
+      for (int x = 0; x < stack.size.width; ++x) {
+        const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
+        f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
+        if (r < 3) f.valid.at<uchar>(y, x) = 0;  // the clipped core
+      }
+    cv::Mat noise(stack.size, CV_32F);
+    cv::randn(noise, 0, 0.005);
+    f.image += noise;
+    stack.frames.push_back(f);
+  }
+  FitOptions options;
+  options.progress = false;
+  const FitResult r = fitCapture(stack, options);
+  // At θ = 0: a ghost at the image centre, of about the true size and brightness.
+  bool found = false;
+  for (const auto& at : r.model.ghostsAt(0)) {
+    const auto& g = at.parameters;
+    found = found || (std::hypot(g.center_x - centre.x, g.center_y - centre.y) < 3 &&
+                      std::abs(g.left - 14) < 3 && std::abs(g.right - 14) < 3 && std::abs(g.border[0] - 0.8) < 0.2);
+  }
+  EXPECT_TRUE(found) << r.summary.BriefReport();
+  int carried = 0;
+  for (const auto& t : r.tracks)
+    for (bool c : t.carried) carried += c;
+  EXPECT_GT(carried, 0);
+}
+
 }  // namespace
 }  // namespace flarekit::fit

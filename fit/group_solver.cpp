@@ -27,7 +27,6 @@ bool SolverOptions::IsValid(std::string* error) const {
   if (max_iterations < 1) return fail("max_iterations must be ≥ 1");
   if (!(function_tolerance > 0)) return fail("function_tolerance must be > 0");
   if (!(parameter_tolerance > 0)) return fail("parameter_tolerance must be > 0");
-  if (threads < 1) return fail("threads must be ≥ 1");
   if (gd_max_iterations < 1) return fail("gd_max_iterations must be ≥ 1");
   if (!(gd_learning_rate > 0)) return fail("gd_learning_rate must be > 0");
   if (!(gd_decay > 0 && gd_decay <= 1)) return fail("gd_decay must be in (0, 1]");
@@ -184,7 +183,7 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   so.max_num_iterations = options.max_iterations;
   so.function_tolerance = options.function_tolerance;
   so.parameter_tolerance = options.parameter_tolerance;
-  so.num_threads = options.threads;
+  so.num_threads = 1;  // the fit must not depend on the thread count (see the header)
   so.logging_type = ceres::SILENT;
   so.minimizer_progress_to_stdout = false;
   std::unique_ptr<TraceCallback> trace;

@@ -5,8 +5,13 @@
 //  - kCeres (default): Ceres's Levenberg–Marquardt trust region with the parameters' bounds, one
 //    residual block per sampled pixel with Cauchy's loss (shared/FITTING_NOTES.md), analytic
 //    Jacobians from model/'s derivative images (the edge part is E applied to them), a dense QR
-//    solve. The model is rendered once per evaluation point through a ceres::EvaluationCallback;
-//    the residual blocks read the shared images (num_threads parallelises over them).
+//    solve. The model is rendered once per evaluation point through a ceres::EvaluationCallback,
+//    on every thread (TBB); the residual blocks then read the shared images on one thread: Ceres
+//    sums its blocks' costs per thread, so with more threads the cost's rounding, the steps it
+//    accepts and so the whole capture's fit depended on the machine's thread count (data_synthetic
+//    Heliar: Spearman ρ of issue 7 0.79 with 2 threads, 0.90 with 1). One thread is no slower:
+//    the blocks only read pixels, and their threads cost more to synchronise than they saved (that
+//    fit: 35.5 against 39.3 s of CPU time, 48.7 against 52.4 s wall on a busy 2-core machine).
 //  - kWalchGd: the paper's optimizer (Walch et al. 2018 §3.3.2) as the baseline: gradient descent
 //    with central-difference gradients, one step size per parameter, a global learning rate
 //    multiplied by 0.8 every 100 iterations, online updates in a fixed order, shape before shade.
@@ -41,8 +46,6 @@ struct SolverOptions {
   double function_tolerance = 1e-5;
   // Ceres: stop when the relative parameter change of a step is below this (> 0).
   double parameter_tolerance = 1e-7;
-  // Ceres: threads evaluating residual blocks (≥ 1).
-  int threads = 2;
   // Walch GD: iterations (one iteration updates every parameter once) (≥ 1).
   int gd_max_iterations = 400;
   // Walch GD: initial learning rate (> 0), multiplied by gd_decay every gd_decay_every iterations

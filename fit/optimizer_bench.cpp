@@ -45,7 +45,6 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
       gd.gd_max_iterations = options.gd_iterations;
       gd.gd_patience = options.gd_iterations;
       gd.record_trace = true;
-      gd.threads = options.fit.threads;
       GroupCost gd_cost(pyramid, edge, {}, one, options.fit.cost);
       const GroupFitResult g = solveGroup(gd_cost, one, gd);
       SolverOptions lm = options.fit.solver;
@@ -54,7 +53,6 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
       lm.max_iterations = 100;
       lm.function_tolerance = 1e-10;
       lm.parameter_tolerance = 1e-10;
-      lm.threads = options.fit.threads;
       GroupCost lm_cost(pyramid, edge, {}, one, options.fit.cost);
       const GroupFitResult c = solveGroup(lm_cost, one, lm);
       // GD's time and evaluations to its own final cost.

@@ -79,8 +79,9 @@ void writeFitReport(const fs::path& dir, const FitResult& result, const FrameSta
   summary["warnings"] = s.warnings;
   nlohmann::json ghosts = nlohmann::json::array();
   for (const auto& t : result.tracks) {
-    int flagged = 0;
+    int flagged = 0, carried = 0;
     for (bool b : t.unexplained) flagged += b;
+    for (bool b : t.carried) carried += b;
     ghosts.push_back({{"id", t.id},
                       {"angle_min_deg", t.angles_deg.front()},
                       {"angle_max_deg", t.angles_deg.back()},
@@ -89,15 +90,17 @@ void writeFitReport(const fs::path& dir, const FitResult& result, const FrameSta
                       {"ends_low", t.end_low},
                       {"ends_high", t.end_high},
                       {"frames_not_described", flagged},
+                      {"frames_carried_through_the_light", carried},
                       {"fraction_not_described", double(flagged) / t.angles_deg.size()}});
     std::ostringstream csv;
     csv << std::setprecision(9) << "angle_deg";
     for (const auto& n : names) csv << "," << n;
-    csv << ",residual_rms,peak,not_described\n";
+    csv << ",residual_rms,peak,not_described,carried\n";
     for (size_t i = 0; i < t.angles_deg.size(); ++i) {
       csv << t.angles_deg[i];
       for (double v : model::toParameterVector(t.fits[i])) csv << "," << v;
-      csv << "," << t.residual_rms[i] << "," << t.peak[i] << "," << (t.unexplained[i] ? 1 : 0) << "\n";
+      csv << "," << t.residual_rms[i] << "," << t.peak[i] << "," << (t.unexplained[i] ? 1 : 0) << ","
+          << (i < t.carried.size() && t.carried[i] ? 1 : 0) << "\n";
     }
     writeTextFileAtomically(dir / ("ghost_" + std::to_string(t.id) + ".csv"), csv.str());
   }
