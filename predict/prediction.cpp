@@ -420,7 +420,7 @@ std::string PredictionSummary::BriefReport() const {
   for (const auto& r : ratings)
     if (r.estimator == map.estimator && std::isfinite(r.percentile))
       o << " (percentile " << cv::format("%.0f", r.percentile) << " of the model's sampled range)";
-  o << "; contrast ratio " << cv::format("%.3g", estimators.contrast_ratio) << ". "
+  o << "; contrast ratio " << cv::format("%.3g", estimators.contrast_ratio) << ". Computed in "
     << cv::format("%.2f", seconds) << " s.";
   return o.str();
 }
