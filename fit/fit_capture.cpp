@@ -576,16 +576,16 @@ class CaptureFitter {
   // The ghost of track `t` carried into frame `pos`, where it lies in the light's own image: there
   // S (detection.h estimateLightImage) takes every part of a ghost that is point-symmetric about
   // the light, and near θ = 0 that is nearly all of it (a ghost's offset from the light shrinks
-  // with θ), so its fit sinks into the noise although the ghost is as bright as a frame before:
-  // on data_synthetic Heliar the brightest ghost (ghost 4 of the truth, peak 0.025, 27 px) lies
-  // 3 px from the light at 0.5° and no track reached below 1.25°, so the model had nothing there
-  // and rated the lights nearest the axis as the least severe. The carried ghost keeps its
-  // shape and brightness of its nearest fit clear of the light and moves its centre towards the
-  // image centre, where every ghost is at θ = 0 (the lens is rotationally symmetric):
+  // with θ), so its fit sinks into the noise although the ghost is as bright as a frame before.
+  // Ended there, the model has no ghost where the flare is brightest. The carried ghost takes the
+  // shape and brightness of the track's nearest fit clear of the light and moves its centre
+  // towards the image centre, where every ghost is at θ = 0 (the lens is rotationally symmetric):
   // c(θ) = c₀ + k·θ, k by least squares over those clear fits (offsets from the optical axis grow
   // ∝ tan θ ≈ θ near it). The fits beside the light are no template: S took the ghost's side
-  // towards the light from them (a 14 px disc fitted with L = 2 px), and their centres are pulled
-  // away. nullopt when the ghost is not in the light's zone or the track has too few clear fits.
+  // towards the light from them (a 14 px disc fitted with L = 2 px) and pulled their centres away.
+  // A ghost that moves with the light is never clear of it and is not carried (data_synthetic
+  // Heliar's brightest, of radius 27 px, 3–33 px from the light over 0.5–5°: its tracks end near
+  // the light still). nullopt when the ghost is not in the light's zone or has too few clear fits.
   std::optional<GhostParameters> carriedInto(const Track& t, int pos) {
     const LightImage& light = lightOf(pos);
     if (!light.found) return std::nullopt;
