@@ -1,6 +1,7 @@
 #include "model/intensity.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 namespace flarekit::model {
@@ -40,6 +41,41 @@ TransferWeights transferWeights(double d, const GhostParameters& g, bool with_de
     w.inside_d_exponent = dpower_dexponent;
   }
   return w;
+}
+
+// One clone per instruction set, chosen when the program loads (the vector code is the same; the
+// file has no fused multiply-adds, model/CMakeLists.txt, so every clone gives the same bits).
+__attribute__((target_clones("avx2", "default")))
+void transferValueWeights(const double* d, int count, const GhostParameters& g, double* border,
+                          double* inside) {
+  using detail::Double4;
+  using detail::Int64x4;
+  const Double4 zero = {}, one = zero + 1;
+  for (int i = 0; i < count; i += 4) {
+    const int lanes = std::min(4, count - i);
+    Double4 distance = zero;  // unused lanes compute from d = 0
+    for (int l = 0; l < lanes; ++l) distance[l] = d[i + l];
+    // The scalar transferValueWeights and transferPower, lane by lane, with selects for branches.
+    const Int64x4 is_inside = distance < 0;
+    const Double4 falloff = is_inside ? zero + g.inside_falloff : zero + g.outside_falloff;
+    const Double4 exponent = is_inside ? zero + g.inside_exponent : zero + g.outside_exponent;
+    const Double4 a = std::bit_cast<Double4>(std::bit_cast<Int64x4>(distance) & 0x7FFFFFFFFFFFFFFF);
+    const Double4 tau = a >= falloff ? one : a / falloff;
+    const Int64x4 in_range = (tau > 0) & (tau < 1);
+    const Double4 y = exponent * detail::transferLogCore(in_range ? tau : one);
+    const Int64x4 fast_exp = (y > -detail::kExpFastLimit) & (y < detail::kExpFastLimit);
+    const Double4 power_fast = detail::transferExpCore(fast_exp ? y : zero);
+    Double4 power = tau >= 1 ? one : (tau > 0 ? power_fast : zero);
+    // τ subnormal, or τ^E below e^−700: libm's range, as the scalar functions do (rare).
+    const Int64x4 slow = in_range & ((tau < detail::kSmallestNormal) | ~fast_exp);
+    for (int l = 0; l < lanes; ++l)
+      if (slow[l]) power[l] = transferPower(tau[l], exponent[l]);
+    const Double4 border_weight = one - power, inside_weight = is_inside ? power : zero;
+    for (int l = 0; l < lanes; ++l) {
+      border[i + l] = border_weight[l];
+      inside[i + l] = inside_weight[l];
+    }
+  }
 }
 
 double intensity(double d, const GhostParameters& g, int channel) {

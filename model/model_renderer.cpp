@@ -270,6 +270,37 @@ inline void shadeGhost(const GhostParameters& g, const detail::PreparedShape& s,
   }
 }
 
+// The values of a plain render (no derivative images) for pixels whose distances are known: the
+// transfer function for up to kCapacity pixels at once (vector lanes, transferValueWeights), about
+// a third of the time per pixel when evaluated one by one. Adds each pixel's value (the same bits
+// as shadeGhost without a Jacobian) into its place in the image.
+template <int kChannels>
+class ShadingQueue {
+ public:
+  explicit ShadingQueue(const GhostParameters& g) : g_(g) {}
+
+  void push(double distance, float* out) {
+    distance_[count_] = distance;
+    out_[count_] = out;
+    if (++count_ == kCapacity) flush();
+  }
+
+  void flush() {
+    transferValueWeights(distance_, count_, g_, border_, inside_);
+    for (int i = 0; i < count_; ++i)
+      for (int c = 0; c < kChannels; ++c)
+        out_[i][c] += static_cast<float>(border_[i] * g_.border[c] + inside_[i] * g_.inside[c]);
+    count_ = 0;
+  }
+
+ private:
+  static constexpr int kCapacity = 64;
+  const GhostParameters& g_;
+  int count_ = 0;
+  double distance_[kCapacity], border_[kCapacity], inside_[kCapacity];
+  float* out_[kCapacity];
+};
+
 // Values (and Jacobian) of one ghost at model point q with the full search.
 inline void evalGhost(const GhostParameters& g, const detail::PreparedShape& s, cv::Point2d q,
                       const SignedDistanceOptions& o, double* values, double* jac) {
@@ -372,6 +403,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
       const int n = pg.count;
       const float inside_value[3] = {static_cast<float>(g.inside[0]), static_cast<float>(g.inside[1]),
                                      static_cast<float>(g.inside[2])};
+      ShadingQueue<kChannels> shading(g);
       for (int by = region.y; by < region.y + region.height; by += block) {
         // The nearest points of the last three exact pixels of each row of this band of blocks:
         // kept across the blocks of the band, so a row continues into the next block.
@@ -560,15 +592,13 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 last_x = x;
                 has_last = true;
               }
-              if (deriv) {
-                shadeGhost(g, pg.shape, e, values, jac.data());
-              } else {  // the value alone, inline (what shadeGhost computes without a Jacobian)
-                double border = 0, inside = 0;
-                transferValueWeights(e.d, g, border, inside);
-                for (int c = 0; c < kChannels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
+              if (!deriv) {
+                shading.push(e.d, out);
+                continue;
               }
+              shadeGhost(g, pg.shape, e, values, jac.data());
               for (int c = 0; c < kChannels; ++c) out[c] += static_cast<float>(values[c]);
-              if (deriv) {
+              {
                 const size_t offset = static_cast<size_t>(x - deriv->rect.x) * kChannels;
                 for (int kk = 0; kk < n; ++kk) {
                   float* d = deriv->images[kk].ptr<float>(y - deriv->rect.y) + offset;
@@ -579,6 +609,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
           }
         }
       }
+      shading.flush();
     }
   };
 
