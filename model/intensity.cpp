@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstring>
 
 namespace flarekit::model {
 
@@ -52,9 +53,12 @@ void transferValueWeights(const double* d, int count, const GhostParameters& g, 
   using detail::Int64x4;
   const Double4 zero = {}, one = zero + 1;
   for (int i = 0; i < count; i += 4) {
-    const int lanes = std::min(4, count - i);
-    Double4 distance = zero;  // unused lanes compute from d = 0
-    for (int l = 0; l < lanes; ++l) distance[l] = d[i + l];
+    const bool full = count - i >= 4;
+    Double4 distance = zero;  // lanes beyond `count` compute from d = 0, and are not stored
+    if (full)
+      std::memcpy(&distance, d + i, sizeof distance);
+    else
+      for (int l = i; l < count; ++l) distance[l - i] = d[l];
     // The scalar transferValueWeights and transferPower, lane by lane, with selects for branches.
     const Int64x4 is_inside = distance < 0;
     const Double4 falloff = is_inside ? zero + g.inside_falloff : zero + g.outside_falloff;
@@ -68,12 +72,18 @@ void transferValueWeights(const double* d, int count, const GhostParameters& g, 
     Double4 power = tau >= 1 ? one : (tau > 0 ? power_fast : zero);
     // τ subnormal, or τ^E below e^−700: libm's range, as the scalar functions do (rare).
     const Int64x4 slow = in_range & ((tau < detail::kSmallestNormal) | ~fast_exp);
-    for (int l = 0; l < lanes; ++l)
-      if (slow[l]) power[l] = transferPower(tau[l], exponent[l]);
+    if ((slow[0] | slow[1] | slow[2] | slow[3]) != 0)
+      for (int l = 0; l < 4; ++l)
+        if (slow[l]) power[l] = transferPower(tau[l], exponent[l]);
     const Double4 border_weight = one - power, inside_weight = is_inside ? power : zero;
-    for (int l = 0; l < lanes; ++l) {
-      border[i + l] = border_weight[l];
-      inside[i + l] = inside_weight[l];
+    if (full) {
+      std::memcpy(border + i, &border_weight, sizeof border_weight);
+      std::memcpy(inside + i, &inside_weight, sizeof inside_weight);
+    } else {
+      for (int l = i; l < count; ++l) {
+        border[l] = border_weight[l - i];
+        inside[l] = inside_weight[l - i];
+      }
     }
   }
 }

@@ -111,7 +111,6 @@ struct PointEval {
   bool inside = false;
   int segment = 0;  // upper segment 0 or 1
   double t = 0;
-  double bx = 0, by = 0;  // nearest point, relative reflected frame
   double rx = 0, ry = 0;  // the point, relative reflected frame
   bool lower = false;
 };
@@ -129,21 +128,21 @@ inline void evalDistance(const detail::PreparedShape& s, cv::Point2d q,
   detail::nearestUpper(s, e.rx, e.ry, o, e.segment, e.t, d2, e.inside ? cutoff_inside : cutoff_outside);
   const double d = std::sqrt(d2);
   e.d = e.inside ? -d : d;
-  e.bx = s.seg[e.segment].x(e.t);
-  e.by = s.seg[e.segment].y(e.t);
 }
 
 // ∂d/∂(Mx, My, L, R, h, Cl, Cr) at the fixed nearest point (envelope theorem, FITTING_NOTES).
 inline void distanceGradient(const GhostParameters& g, const detail::PreparedShape& s,
                              const PointEval& e, double* grad) {
-  double nx = e.rx - e.bx, ny = e.ry - e.by;
+  // The nearest point, computed here: plain renders need only the distance.
+  const detail::PowerCubic& seg = s.seg[e.segment];
+  double nx = e.rx - seg.x(e.t), ny = e.ry - seg.y(e.t);
   const double len = std::sqrt(nx * nx + ny * ny);
   if (len > 1e-12) {
     const double k = (e.inside ? -1.0 : 1.0) / len;
     nx *= k;
     ny *= k;
   } else {  // on the outline: the outward normal (tangent turned by −90°, clockwise outline)
-    const double tx = s.seg[e.segment].dx(e.t), ty = s.seg[e.segment].dy(e.t);
+    const double tx = seg.dx(e.t), ty = seg.dy(e.t);
     const double tl = std::sqrt(tx * tx + ty * ty);
     nx = tl > 0 ? ty / tl : 0;
     ny = tl > 0 ? -tx / tl : 0;
@@ -186,9 +185,7 @@ inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::Bl
   e.segment = c.segment;
   e.t = c.t;
   const detail::PowerCubic& seg = s.seg[c.segment];
-  e.bx = seg.x(c.t);
-  e.by = seg.y(c.t);
-  const double vx = e.rx - e.bx, vy = e.ry - e.by;
+  const double vx = e.rx - seg.x(c.t), vy = e.ry - seg.y(c.t);
   const double tx = seg.dx(c.t), ty = seg.dy(c.t);
   const double cross = tx * vy - ty * vx;  // > 0 on the inner side (clockwise outline, y down)
   const double v2 = vx * vx + vy * vy, t2 = tx * tx + ty * ty;
@@ -201,21 +198,25 @@ inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::Bl
 }
 
 // The signed distance at model point q by the renderer's fast path (detail::certifiedNearest):
-// Newton from `hint` (the previous pixel's nearest point) or, without one, from an angle guess,
+// Newton from `hint` (the previous pixel's nearest point) when `has_hint`, else from an angle guess,
 // certified as the global nearest point. False when it cannot certify (then the caller runs a
 // full search, and `bound`, when Newton converged, is an outline point near p to start it from).
 // When true, e.d is exact (no cutoff).
 inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
-                                  const detail::Candidate* hint, PointEval& e,
+                                  bool has_hint, const detail::Candidate& hint, PointEval& e,
                                   detail::Candidate& bound, bool& has_bound, double* dt_dx = nullptr) {
   e.rx = q.x - s.mx;
   e.lower = q.y > s.my;
   e.ry = -std::abs(q.y - s.my);
   has_bound = false;
-  detail::Candidate c = hint ? *hint : detail::angleGuess(s, e.rx, e.ry);
+  // The start's segment and t only (Newton does not read d²): the hint's fields were just
+  // written one by one, and a copy of the whole struct reads t and d² with one 16-byte load, which
+  // cannot take its data from two 8-byte stores still in flight (a store-forwarding stall on
+  // the chain from pixel to pixel; it cost ~25 % of a frame's time in one build).
+  detail::Candidate c = has_hint ? detail::Candidate{hint.segment, hint.t, 0} : detail::angleGuess(s, e.rx, e.ry);
   bool inside = false;
   detail::Certificate result = detail::certifiedNearest(s, e.rx, e.ry, c, inside, dt_dx);
-  if (result == detail::Certificate::kNotConverged && hint) {
+  if (result == detail::Certificate::kNotConverged && has_hint) {
     // The previous pixel's basin was a poor start (the row crossed a joint or the medial axis):
     // one more try from the angle guess.
     c = detail::angleGuess(s, e.rx, e.ry);
@@ -229,9 +230,6 @@ inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
   e.segment = c.segment;
   e.t = c.t;
   e.inside = inside;
-  const detail::PowerCubic& seg = s.seg[c.segment];
-  e.bx = seg.x(c.t);
-  e.by = seg.y(c.t);
   const double d = std::sqrt(c.d2);
   e.d = inside ? -d : d;
   return true;
@@ -425,7 +423,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
             detail::Candidate unused;
             bool has_unused = false;
-            if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec, unused, has_unused)) {
+            if (fast && evalDistanceCertified(pg.shape, qc, false, {}, ec, unused, has_unused)) {
               centre_nearest = {ec.segment, ec.t, ec.d * ec.d};
               has_centre_nearest = true;
             } else if (fast && detail::depthLowerBound(pg.shape, qc.x - pg.shape.mx, -std::abs(qc.y - pg.shape.my)) >=
@@ -542,7 +540,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               detail::Candidate bound;
               bool has_bound = false;
               double slope = std::numeric_limits<double>::quiet_NaN();
-              if (fast && evalDistanceCertified(pg.shape, q, has_hint ? &start : nullptr, e, bound, has_bound, &slope)) {
+              if (fast && evalDistanceCertified(pg.shape, q, has_hint, start, e, bound, has_bound, &slope)) {
                 exact = true;
               } else if (fast && bw * bh > 1 && mode == 0) {
                 slope = std::numeric_limits<double>::quiet_NaN();  // the block search gives none
