@@ -79,7 +79,12 @@ inline constexpr std::array<double, 64> kExp2Table = {
 // the scalar operations in the same order, so every lane's result equals the scalar one bit for
 // bit. The few operations without a common spelling are the overloads below. Always inlined: the
 // vector forms are compiled into each instruction-set clone of their caller (a call between
-// clones would pass the vectors differently).
+// clones would pass the vectors differently), so GCC's note that passing 32-byte vectors without
+// AVX differs from passing them with it (-Wpsabi) never applies.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
 #define FLAREKIT_LANES_INLINE [[gnu::always_inline]] inline
 typedef double Double4 __attribute__((vector_size(32)));
 typedef std::int64_t Int64x4 __attribute__((vector_size(32)));
@@ -173,3 +178,7 @@ inline double transferExp(double y) {
 }
 
 }  // namespace flarekit::model::detail
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
