@@ -1,7 +1,6 @@
 #include "model/intensity.h"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -63,7 +62,7 @@ void transferValueWeights(const double* d, int count, const GhostParameters& g, 
     const Int64x4 is_inside = distance < 0;
     const Double4 falloff = is_inside ? zero + g.inside_falloff : zero + g.outside_falloff;
     const Double4 exponent = is_inside ? zero + g.inside_exponent : zero + g.outside_exponent;
-    const Double4 a = std::bit_cast<Double4>(std::bit_cast<Int64x4>(distance) & 0x7FFFFFFFFFFFFFFF);
+    const Double4 a = detail::bitCast<Double4>(detail::bitCast<Int64x4>(distance) & 0x7FFFFFFFFFFFFFFF);
     const Double4 tau = a >= falloff ? one : a / falloff;
     const Int64x4 in_range = (tau > 0) & (tau < 1);
     const Double4 y = exponent * detail::transferLogCore(in_range ? tau : one);

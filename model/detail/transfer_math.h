@@ -16,7 +16,6 @@
 // |y| ≥ 700 for the exponential) go to libm.
 
 #include <array>
-#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -93,6 +92,12 @@ typedef std::int32_t Int32x4 __attribute__((vector_size(16)));
 template <typename Real>
 using IntFor = std::conditional_t<std::is_same_v<Real, double>, std::int64_t, Int64x4>;
 
+// std::bit_cast, as the builtin: inlined in unoptimised builds too, where std::bit_cast is a call,
+// and a call from the AVX2 clone into the plain x86-64 copy would return the vector elsewhere.
+template <typename To, typename From>
+FLAREKIT_LANES_INLINE To bitCast(const From& from) {
+  return __builtin_bit_cast(To, from);
+}
 // The integer part of a value in [0, 2^31) (truncation, as a cast to int).
 FLAREKIT_LANES_INLINE std::int64_t truncateToInt(double x) { return static_cast<int>(x); }
 FLAREKIT_LANES_INLINE Int64x4 truncateToInt(Double4 x) {
@@ -104,12 +109,12 @@ FLAREKIT_LANES_INLINE Int64x4 truncateToInt(Double4 x) {
 // double conversion).
 FLAREKIT_LANES_INLINE double toDouble(std::int64_t k) { return static_cast<double>(k); }
 FLAREKIT_LANES_INLINE Double4 toDouble(Int64x4 k) {
-  return std::bit_cast<Double4>(k + 0x4338000000000000) - 6755399441055744.0;
+  return bitCast<Double4>(k + 0x4338000000000000) - 6755399441055744.0;
 }
 // The integer value of a double that holds one below 2^51 in magnitude (exact).
 FLAREKIT_LANES_INLINE std::int64_t roundedToInt(double x) { return static_cast<std::int64_t>(x); }
 FLAREKIT_LANES_INLINE Int64x4 roundedToInt(Double4 x) {
-  return std::bit_cast<Int64x4>(x + 6755399441055744.0) - 0x4338000000000000;
+  return bitCast<Int64x4>(x + 6755399441055744.0) - 0x4338000000000000;
 }
 // table[index] per lane.
 template <std::size_t N>
@@ -129,7 +134,7 @@ FLAREKIT_LANES_INLINE Int64x4 oneIf(Int64x4 condition) { return condition & 1; }
 template <typename Real>
 FLAREKIT_LANES_INLINE Real transferLogCore(Real x) {
   using Int = IntFor<Real>;
-  const Int bits = std::bit_cast<Int>(x);
+  const Int bits = bitCast<Int>(x);
   // m in [√½, √2] (ln x has no cancellation near x = 1): the mantissa in [1, 2), halved when above
   // √2 by taking one from its exponent (exact, the same bits as m·0.5). Written without a branch:
   // for τ spread over (0, 1) the test goes either way at random, and a mispredicted branch cost
@@ -137,7 +142,7 @@ FLAREKIT_LANES_INLINE Real transferLogCore(Real x) {
   const Int mantissa = (bits & 0x000FFFFFFFFFFFFF) | 0x3FF0000000000000;  // [1, 2)
   const Int high = oneIf(mantissa > 0x3FF6A09E667F3BCD);  // > 1.4142135623730951 (as bits)
   const Int k = (bits >> 52) - 1023 + high;
-  const Real m = std::bit_cast<Real>(mantissa - (high << 52));
+  const Real m = bitCast<Real>(mantissa - (high << 52));
   const Int j = truncateToInt(m * 128 + 0.5);  // 91 … 181
   const Real c = toDouble(j) * (1.0 / 128);
   const Real s = (m - c) / (m + c);
@@ -158,7 +163,7 @@ FLAREKIT_LANES_INLINE Real transferExpCore(Real y) {
   const Int k = roundedToInt(kd);
   const Real e = 1 + r * (1 + r * (1.0 / 2 + r * (1.0 / 6 + r * (1.0 / 24 + r * (1.0 / 120)))));
   // 2^(k/64) = 2^(k >> 6)·2^((k & 63)/64)
-  const Real scale = std::bit_cast<Real>(((k >> 6) + 1023) << 52);
+  const Real scale = bitCast<Real>(((k >> 6) + 1023) << 52);
   return lookup(kExp2Table, k & 63) * e * scale;
 }
 
