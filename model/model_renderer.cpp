@@ -111,6 +111,7 @@ struct PointEval {
   bool inside = false;
   int segment = 0;  // upper segment 0 or 1
   double t = 0;
+  double bx = 0, by = 0;  // nearest point, relative reflected frame
   double rx = 0, ry = 0;  // the point, relative reflected frame
   bool lower = false;
 };
@@ -128,21 +129,21 @@ inline void evalDistance(const detail::PreparedShape& s, cv::Point2d q,
   detail::nearestUpper(s, e.rx, e.ry, o, e.segment, e.t, d2, e.inside ? cutoff_inside : cutoff_outside);
   const double d = std::sqrt(d2);
   e.d = e.inside ? -d : d;
+  e.bx = s.seg[e.segment].x(e.t);
+  e.by = s.seg[e.segment].y(e.t);
 }
 
 // ∂d/∂(Mx, My, L, R, h, Cl, Cr) at the fixed nearest point (envelope theorem, FITTING_NOTES).
 inline void distanceGradient(const GhostParameters& g, const detail::PreparedShape& s,
                              const PointEval& e, double* grad) {
-  // The nearest point, computed here: plain renders need only the distance.
-  const detail::PowerCubic& seg = s.seg[e.segment];
-  double nx = e.rx - seg.x(e.t), ny = e.ry - seg.y(e.t);
+  double nx = e.rx - e.bx, ny = e.ry - e.by;
   const double len = std::sqrt(nx * nx + ny * ny);
   if (len > 1e-12) {
     const double k = (e.inside ? -1.0 : 1.0) / len;
     nx *= k;
     ny *= k;
   } else {  // on the outline: the outward normal (tangent turned by −90°, clockwise outline)
-    const double tx = seg.dx(e.t), ty = seg.dy(e.t);
+    const double tx = s.seg[e.segment].dx(e.t), ty = s.seg[e.segment].dy(e.t);
     const double tl = std::sqrt(tx * tx + ty * ty);
     nx = tl > 0 ? ty / tl : 0;
     ny = tl > 0 ? -tx / tl : 0;
@@ -185,7 +186,9 @@ inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::Bl
   e.segment = c.segment;
   e.t = c.t;
   const detail::PowerCubic& seg = s.seg[c.segment];
-  const double vx = e.rx - seg.x(c.t), vy = e.ry - seg.y(c.t);
+  e.bx = seg.x(c.t);
+  e.by = seg.y(c.t);
+  const double vx = e.rx - e.bx, vy = e.ry - e.by;
   const double tx = seg.dx(c.t), ty = seg.dy(c.t);
   const double cross = tx * vy - ty * vx;  // > 0 on the inner side (clockwise outline, y down)
   const double v2 = vx * vx + vy * vy, t2 = tx * tx + ty * ty;
@@ -230,6 +233,9 @@ inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
   e.segment = c.segment;
   e.t = c.t;
   e.inside = inside;
+  const detail::PowerCubic& seg = s.seg[c.segment];
+  e.bx = seg.x(c.t);
+  e.by = seg.y(c.t);
   const double d = std::sqrt(c.d2);
   e.d = inside ? -d : d;
   return true;
