@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace flarekit::model {
 
@@ -40,6 +41,50 @@ TransferWeights transferWeights(double d, const GhostParameters& g, bool with_de
     w.inside_d_exponent = dpower_dexponent;
   }
   return w;
+}
+
+// One clone per instruction set, chosen when the program loads (the vector code is the same; the
+// file has no fused multiply-adds, model/CMakeLists.txt, so every clone gives the same bits).
+__attribute__((target_clones("avx2", "default")))
+void transferValueWeights(const double* d, int count, const GhostParameters& g, double* border,
+                          double* inside) {
+  using detail::Double4;
+  using detail::Int64x4;
+  const Double4 zero = {}, one = zero + 1;
+  for (int i = 0; i < count; i += 4) {
+    const bool full = count - i >= 4;
+    Double4 distance = zero;  // lanes beyond `count` compute from d = 0, and are not stored
+    if (full)
+      std::memcpy(&distance, d + i, sizeof distance);
+    else
+      for (int l = i; l < count; ++l) distance[l - i] = d[l];
+    // The scalar transferValueWeights and transferPower, lane by lane, with selects for branches.
+    const Int64x4 is_inside = distance < 0;
+    const Double4 falloff = is_inside ? zero + g.inside_falloff : zero + g.outside_falloff;
+    const Double4 exponent = is_inside ? zero + g.inside_exponent : zero + g.outside_exponent;
+    const Double4 a = detail::bitCast<Double4>(detail::bitCast<Int64x4>(distance) & 0x7FFFFFFFFFFFFFFF);
+    const Double4 tau = a >= falloff ? one : a / falloff;
+    const Int64x4 in_range = (tau > 0) & (tau < 1);
+    const Double4 y = exponent * detail::transferLogCore(in_range ? tau : one);
+    const Int64x4 fast_exp = (y > -detail::kExpFastLimit) & (y < detail::kExpFastLimit);
+    const Double4 power_fast = detail::transferExpCore(fast_exp ? y : zero);
+    Double4 power = tau >= 1 ? one : (tau > 0 ? power_fast : zero);
+    // τ subnormal, or τ^E below e^−700: libm's range, as the scalar functions do (rare).
+    const Int64x4 slow = in_range & ((tau < detail::kSmallestNormal) | ~fast_exp);
+    if ((slow[0] | slow[1] | slow[2] | slow[3]) != 0)
+      for (int l = 0; l < 4; ++l)
+        if (slow[l]) power[l] = transferPower(tau[l], exponent[l]);
+    const Double4 border_weight = one - power, inside_weight = is_inside ? power : zero;
+    if (full) {
+      std::memcpy(border + i, &border_weight, sizeof border_weight);
+      std::memcpy(inside + i, &inside_weight, sizeof inside_weight);
+    } else {
+      for (int l = i; l < count; ++l) {
+        border[l] = border_weight[l - i];
+        inside[l] = inside_weight[l - i];
+      }
+    }
+  }
 }
 
 double intensity(double d, const GhostParameters& g, int channel) {

@@ -57,6 +57,12 @@ inline void transferValueWeights(double d, const GhostParameters& g, double& bor
   inside = is_inside ? power : 0.0;
 }
 
+// transferValueWeights for `count` signed distances at once (a renderer's pixels): the same bits
+// per distance, computed in vector lanes (four doubles per instruction where the machine has
+// AVX2, two with SSE2).
+void transferValueWeights(const double* d, int count, const GhostParameters& g, double* border,
+                          double* inside);
+
 // The weights at signed distance `d` (pixels) for the ghost's Fi, Ei, Fo, Eo.
 TransferWeights transferWeights(double d, const GhostParameters& ghost, bool with_derivatives);
 

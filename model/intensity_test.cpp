@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <random>
+#include <vector>
 
 #include "model/detail/transfer_math.h"
 
@@ -73,6 +74,40 @@ TEST(Intensity, WeightDerivativesMatchCentralDifferences) {
   const TransferWeights at_border = transferWeights(0, g, true);
   EXPECT_TRUE(std::isfinite(at_border.border_d_distance));
   EXPECT_TRUE(std::isfinite(at_border.border_d_exponent));
+}
+
+// The batch form (vector lanes, what plain renders use) gives each distance the scalar weights bit
+// for bit: random distances across both fall-off bands and beyond, the special values, and those
+// that leave the fast ranges (τ subnormal; τ^E below e^−700 with a large exponent), for counts
+// that fill the lanes and counts that do not.
+TEST(Intensity, BatchWeightsEqualTheScalarOnesBitForBit) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> unit(0, 1);
+  for (int trial = 0; trial < 200; ++trial) {
+    GhostParameters g = ghost();
+    g.inside_falloff = 0.5 + 40 * unit(rng);
+    g.outside_falloff = 0.5 + 10 * unit(rng);
+    g.inside_exponent = trial % 10 == 0 ? 200.0 : 0.1 * std::pow(100.0, unit(rng));
+    g.outside_exponent = 0.1 * std::pow(100.0, unit(rng));
+    const int count = 1 + trial % 70;
+    std::vector<double> d(count);
+    for (int i = 0; i < count; ++i) {
+      const double u = unit(rng);
+      d[i] = u < 0.1   ? -g.inside_falloff * std::pow(10.0, -30 * unit(rng))  // τ near 0, down to 1e-30
+             : u < 0.15 ? -g.inside_falloff * 1e-310                          // τ subnormal
+             : u < 0.2  ? (unit(rng) < 0.5 ? -g.inside_falloff : g.outside_falloff)
+             : u < 0.25 ? (unit(rng) < 0.5 ? 0.0 : -0.0)
+                        : (2 * unit(rng) - 1) * 1.2 * (unit(rng) < 0.5 ? g.inside_falloff : g.outside_falloff);
+    }
+    std::vector<double> border(count), inside(count);
+    transferValueWeights(d.data(), count, g, border.data(), inside.data());
+    for (int i = 0; i < count; ++i) {
+      double b = 0, in = 0;
+      transferValueWeights(d[i], g, b, in);
+      ASSERT_EQ(std::bit_cast<std::uint64_t>(border[i]), std::bit_cast<std::uint64_t>(b)) << "d = " << d[i];
+      ASSERT_EQ(std::bit_cast<std::uint64_t>(inside[i]), std::bit_cast<std::uint64_t>(in)) << "d = " << d[i];
+    }
+  }
 }
 
 // The renderer's inline logarithm and exponential (detail/transfer_math.h) against glibc's: within

@@ -201,21 +201,25 @@ inline void evalDistanceInBlock(const detail::PreparedShape& s, const detail::Bl
 }
 
 // The signed distance at model point q by the renderer's fast path (detail::certifiedNearest):
-// Newton from `hint` (the previous pixel's nearest point) or, without one, from an angle guess,
+// Newton from `hint` (the previous pixel's nearest point) when `has_hint`, else from an angle guess,
 // certified as the global nearest point. False when it cannot certify (then the caller runs a
 // full search, and `bound`, when Newton converged, is an outline point near p to start it from).
 // When true, e.d is exact (no cutoff).
 inline bool evalDistanceCertified(const detail::PreparedShape& s, cv::Point2d q,
-                                  const detail::Candidate* hint, PointEval& e,
+                                  bool has_hint, const detail::Candidate& hint, PointEval& e,
                                   detail::Candidate& bound, bool& has_bound, double* dt_dx = nullptr) {
   e.rx = q.x - s.mx;
   e.lower = q.y > s.my;
   e.ry = -std::abs(q.y - s.my);
   has_bound = false;
-  detail::Candidate c = hint ? *hint : detail::angleGuess(s, e.rx, e.ry);
+  // The start's segment and t only (Newton does not read d²): the hint's fields were just
+  // written one by one, and a copy of the whole struct reads t and d² with one 16-byte load, which
+  // cannot take its data from two 8-byte stores still in flight (a store-forwarding stall on
+  // the chain from pixel to pixel: a third more time per frame in one build).
+  detail::Candidate c = has_hint ? detail::Candidate{hint.segment, hint.t, 0} : detail::angleGuess(s, e.rx, e.ry);
   bool inside = false;
   detail::Certificate result = detail::certifiedNearest(s, e.rx, e.ry, c, inside, dt_dx);
-  if (result == detail::Certificate::kNotConverged && hint) {
+  if (result == detail::Certificate::kNotConverged && has_hint) {
     // The previous pixel's basin was a poor start (the row crossed a joint or the medial axis):
     // one more try from the angle guess.
     c = detail::angleGuess(s, e.rx, e.ry);
@@ -269,6 +273,37 @@ inline void shadeGhost(const GhostParameters& g, const detail::PreparedShape& s,
     row[w.is_inside ? layout.ei() : layout.eo()] = di_de;
   }
 }
+
+// The values of a plain render (no derivative images) for pixels whose distances are known: the
+// transfer function (a third of a fall-off pixel's time, evaluated pixel by pixel) for up to
+// kCapacity pixels at once in vector lanes (transferValueWeights). Adds each pixel's value (the
+// same bits as shadeGhost without a Jacobian) into its place in the image.
+template <int kChannels>
+class ShadingQueue {
+ public:
+  explicit ShadingQueue(const GhostParameters& g) : g_(g) {}
+
+  void push(double distance, float* out) {
+    distance_[count_] = distance;
+    out_[count_] = out;
+    if (++count_ == kCapacity) flush();
+  }
+
+  void flush() {
+    transferValueWeights(distance_, count_, g_, border_, inside_);
+    for (int i = 0; i < count_; ++i)
+      for (int c = 0; c < kChannels; ++c)
+        out_[i][c] += static_cast<float>(border_[i] * g_.border[c] + inside_[i] * g_.inside[c]);
+    count_ = 0;
+  }
+
+ private:
+  static constexpr int kCapacity = 64;
+  const GhostParameters& g_;
+  int count_ = 0;
+  double distance_[kCapacity], border_[kCapacity], inside_[kCapacity];
+  float* out_[kCapacity];
+};
 
 // Values (and Jacobian) of one ghost at model point q with the full search.
 inline void evalGhost(const GhostParameters& g, const detail::PreparedShape& s, cv::Point2d q,
@@ -372,6 +407,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
       const int n = pg.count;
       const float inside_value[3] = {static_cast<float>(g.inside[0]), static_cast<float>(g.inside[1]),
                                      static_cast<float>(g.inside[2])};
+      ShadingQueue<kChannels> shading(g);
       for (int by = region.y; by < region.y + region.height; by += block) {
         // The nearest points of the last three exact pixels of each row of this band of blocks:
         // kept across the blocks of the band, so a row continues into the next block.
@@ -393,7 +429,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
             reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
             detail::Candidate unused;
             bool has_unused = false;
-            if (fast && evalDistanceCertified(pg.shape, qc, nullptr, ec, unused, has_unused)) {
+            if (fast && evalDistanceCertified(pg.shape, qc, false, {}, ec, unused, has_unused)) {
               centre_nearest = {ec.segment, ec.t, ec.d * ec.d};
               has_centre_nearest = true;
             } else if (fast && detail::depthLowerBound(pg.shape, qc.x - pg.shape.mx, -std::abs(qc.y - pg.shape.my)) >=
@@ -510,7 +546,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
               detail::Candidate bound;
               bool has_bound = false;
               double slope = std::numeric_limits<double>::quiet_NaN();
-              if (fast && evalDistanceCertified(pg.shape, q, has_hint ? &start : nullptr, e, bound, has_bound, &slope)) {
+              if (fast && evalDistanceCertified(pg.shape, q, has_hint, start, e, bound, has_bound, &slope)) {
                 exact = true;
               } else if (fast && bw * bh > 1 && mode == 0) {
                 slope = std::numeric_limits<double>::quiet_NaN();  // the block search gives none
@@ -560,25 +596,22 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 last_x = x;
                 has_last = true;
               }
-              if (deriv) {
-                shadeGhost(g, pg.shape, e, values, jac.data());
-              } else {  // the value alone, inline (what shadeGhost computes without a Jacobian)
-                double border = 0, inside = 0;
-                transferValueWeights(e.d, g, border, inside);
-                for (int c = 0; c < kChannels; ++c) values[c] = border * g.border[c] + inside * g.inside[c];
+              if (!deriv) {
+                shading.push(e.d, out);
+                continue;
               }
+              shadeGhost(g, pg.shape, e, values, jac.data());
               for (int c = 0; c < kChannels; ++c) out[c] += static_cast<float>(values[c]);
-              if (deriv) {
-                const size_t offset = static_cast<size_t>(x - deriv->rect.x) * kChannels;
-                for (int kk = 0; kk < n; ++kk) {
-                  float* d = deriv->images[kk].ptr<float>(y - deriv->rect.y) + offset;
-                  for (int c = 0; c < kChannels; ++c) d[c] = static_cast<float>(jac[c * n + kk]);
-                }
+              const size_t offset = static_cast<size_t>(x - deriv->rect.x) * kChannels;
+              for (int kk = 0; kk < n; ++kk) {
+                float* d = deriv->images[kk].ptr<float>(y - deriv->rect.y) + offset;
+                for (int c = 0; c < kChannels; ++c) d[c] = static_cast<float>(jac[c * n + kk]);
               }
             }
           }
         }
       }
+      shading.flush();
     }
   };
 

@@ -16,9 +16,10 @@
 // |y| ≥ 700 for the exponential) go to libm.
 
 #include <array>
-#include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
+#include <type_traits>
 
 namespace flarekit::model::detail {
 
@@ -72,37 +73,118 @@ inline constexpr std::array<double, 64> kExp2Table = {
     1.8741676341103, 1.8945759815869656, 1.9152065613971474, 1.9360617934922943,
     1.9571441241754002, 1.978456026387951};;
 
-inline double transferLog(double x) {
-  if (!(x >= 2.2250738585072014e-308) || !(x <= 1.7976931348623157e308)) return std::log(x);
-  const std::uint64_t bits = std::bit_cast<std::uint64_t>(x);
+// The same arithmetic on one double or on four at once (GCC/Clang vector extension; the renderer
+// evaluates the transfer function for a block's pixels together, intensity.h): each lane does
+// the scalar operations in the same order, so every lane's result equals the scalar one bit for
+// bit. The few operations without a common spelling are the overloads below. Always inlined: the
+// vector forms are compiled into each instruction-set clone of their caller (a call between
+// clones would pass the vectors differently), so GCC's note that passing 32-byte vectors without
+// AVX differs from passing them with it (-Wpsabi) never applies. (Clang 14 rejects such calls in
+// the plain x86-64 clone even when they are inlined: there, two-lane vectors would be the way.)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+#define FLAREKIT_LANES_INLINE [[gnu::always_inline]] inline
+typedef double Double4 __attribute__((vector_size(32)));
+typedef std::int64_t Int64x4 __attribute__((vector_size(32)));
+typedef std::int32_t Int32x4 __attribute__((vector_size(16)));
+
+template <typename Real>
+using IntFor = std::conditional_t<std::is_same_v<Real, double>, std::int64_t, Int64x4>;
+
+// std::bit_cast, as the builtin: inlined in unoptimised builds too, where std::bit_cast is a call,
+// and a call from the AVX2 clone into the plain x86-64 copy would return the vector elsewhere.
+template <typename To, typename From>
+FLAREKIT_LANES_INLINE To bitCast(const From& from) {
+  return __builtin_bit_cast(To, from);
+}
+// The integer part of a value in [0, 2^31) (truncation, as a cast to int).
+FLAREKIT_LANES_INLINE std::int64_t truncateToInt(double x) { return static_cast<int>(x); }
+FLAREKIT_LANES_INLINE Int64x4 truncateToInt(Double4 x) {
+  // double → int32 is one instruction per lane group (cvttpd2dq) on every x86-64; to int64 is not.
+  return __builtin_convertvector(__builtin_convertvector(x, Int32x4), Int64x4);
+}
+// An integer below 2^51 in magnitude as a double (exact either way): 1.5·2^52 + k has k in its
+// low mantissa bits, so the vector form is an integer add and a subtraction (AVX2 has no int64 →
+// double conversion).
+FLAREKIT_LANES_INLINE double toDouble(std::int64_t k) { return static_cast<double>(k); }
+FLAREKIT_LANES_INLINE Double4 toDouble(Int64x4 k) {
+  return bitCast<Double4>(k + 0x4338000000000000) - 6755399441055744.0;
+}
+// The integer value of a double that holds one below 2^51 in magnitude (exact).
+FLAREKIT_LANES_INLINE std::int64_t roundedToInt(double x) { return static_cast<std::int64_t>(x); }
+FLAREKIT_LANES_INLINE Int64x4 roundedToInt(Double4 x) {
+  return bitCast<Int64x4>(x + 6755399441055744.0) - 0x4338000000000000;
+}
+// table[index] per lane.
+template <std::size_t N>
+FLAREKIT_LANES_INLINE double lookup(const std::array<double, N>& table, std::int64_t index) {
+  return table[static_cast<std::size_t>(index)];
+}
+template <std::size_t N>
+FLAREKIT_LANES_INLINE Double4 lookup(const std::array<double, N>& table, Int64x4 index) {
+  return Double4{table[static_cast<std::size_t>(index[0])], table[static_cast<std::size_t>(index[1])],
+                 table[static_cast<std::size_t>(index[2])], table[static_cast<std::size_t>(index[3])]};
+}
+// 1 where `condition` holds, else 0 (a vector comparison gives −1 per true lane).
+FLAREKIT_LANES_INLINE std::int64_t oneIf(bool condition) { return condition; }
+FLAREKIT_LANES_INLINE Int64x4 oneIf(Int64x4 condition) { return condition & 1; }
+
+// ln x for normal, finite, positive x (the caller checks the range; transferLog below).
+template <typename Real>
+FLAREKIT_LANES_INLINE Real transferLogCore(Real x) {
+  using Int = IntFor<Real>;
+  const Int bits = bitCast<Int>(x);
   // m in [√½, √2] (ln x has no cancellation near x = 1): the mantissa in [1, 2), halved when above
   // √2 by taking one from its exponent (exact, the same bits as m·0.5). Written without a branch:
   // for τ spread over (0, 1) the test goes either way at random, and a mispredicted branch cost
-  // more than the whole reduction.
-  const std::uint64_t mantissa = (bits & 0x000FFFFFFFFFFFFFull) | 0x3FF0000000000000ull;  // [1, 2)
-  const std::uint64_t high = mantissa > 0x3FF6A09E667F3BCDull;  // > 1.4142135623730951 (as bits: both positive)
-  const int k = static_cast<int>(bits >> 52) - 1023 + static_cast<int>(high);
-  const double m = std::bit_cast<double>(mantissa - (high << 52));
-  const int j = static_cast<int>(m * 128 + 0.5);  // 91 … 181
-  const double c = j * (1.0 / 128);
-  const double s = (m - c) / (m + c);
-  const double s2 = s * s;
-  const double tail = 2 * s + s * (s2 * (2.0 / 3 + s2 * (2.0 / 5 + s2 * (2.0 / 7))));
-  const double kd = k;
-  return kd * kLn2Hi + ((kLnTable[j - 90] + tail) + kd * kLn2Lo);
+  // more than the whole reduction. (bits and mantissa are positive: signed compares and shifts.)
+  const Int mantissa = (bits & 0x000FFFFFFFFFFFFF) | 0x3FF0000000000000;  // [1, 2)
+  const Int high = oneIf(mantissa > 0x3FF6A09E667F3BCD);  // > 1.4142135623730951 (as bits)
+  const Int k = (bits >> 52) - 1023 + high;
+  const Real m = bitCast<Real>(mantissa - (high << 52));
+  const Int j = truncateToInt(m * 128 + 0.5);  // 91 … 181
+  const Real c = toDouble(j) * (1.0 / 128);
+  const Real s = (m - c) / (m + c);
+  const Real s2 = s * s;
+  const Real tail = 2 * s + s * (s2 * (2.0 / 3 + s2 * (2.0 / 5 + s2 * (2.0 / 7))));
+  const Real kd = toDouble(k);
+  return kd * kLn2Hi + ((lookup(kLnTable, j - 90) + tail) + kd * kLn2Lo);
+}
+
+// e^y for |y| < 700 (the caller checks the range; transferExp below).
+template <typename Real>
+FLAREKIT_LANES_INLINE Real transferExpCore(Real y) {
+  using Int = IntFor<Real>;
+  // k = round(64·y / ln 2) by the 1.5·2^52 shift (exact for |64·y / ln 2| < 2^51).
+  constexpr double kShift = 6755399441055744.0;
+  const Real kd = (y * (64 / 0.69314718055994530942) + kShift) - kShift;
+  const Real r = (y - kd * (kLn2Hi / 64)) - kd * (kLn2Lo / 64);
+  const Int k = roundedToInt(kd);
+  const Real e = 1 + r * (1 + r * (1.0 / 2 + r * (1.0 / 6 + r * (1.0 / 24 + r * (1.0 / 120)))));
+  // 2^(k/64) = 2^(k >> 6)·2^((k & 63)/64)
+  const Real scale = bitCast<Real>(((k >> 6) + 1023) << 52);
+  return lookup(kExp2Table, k & 63) * e * scale;
+}
+
+// The smallest normal double: below it (subnormals, 0) transferLog leaves the fast path.
+inline constexpr double kSmallestNormal = 2.2250738585072014e-308;
+// |y| ≥ this leaves transferExp's fast path.
+inline constexpr double kExpFastLimit = 700.0;
+
+inline double transferLog(double x) {
+  if (!(x >= kSmallestNormal) || !(x <= 1.7976931348623157e308)) return std::log(x);
+  return transferLogCore(x);
 }
 
 inline double transferExp(double y) {
-  if (!(y > -700.0 && y < 700.0)) return std::exp(y);
-  // k = round(64·y / ln 2) by the 1.5·2^52 shift (exact for |64·y / ln 2| < 2^51).
-  constexpr double kShift = 6755399441055744.0;
-  const double kd = (y * (64 / 0.69314718055994530942) + kShift) - kShift;
-  const double r = (y - kd * (kLn2Hi / 64)) - kd * (kLn2Lo / 64);
-  const std::int64_t k = static_cast<std::int64_t>(kd);
-  const double e = 1 + r * (1 + r * (1.0 / 2 + r * (1.0 / 6 + r * (1.0 / 24 + r * (1.0 / 120)))));
-  // 2^(k/64) = 2^(k >> 6)·2^((k & 63)/64)
-  const double scale = std::bit_cast<double>(static_cast<std::uint64_t>((k >> 6) + 1023) << 52);
-  return kExp2Table[static_cast<std::size_t>(k & 63)] * e * scale;
+  if (!(y > -kExpFastLimit && y < kExpFastLimit)) return std::exp(y);
+  return transferExpCore(y);
 }
 
 }  // namespace flarekit::model::detail
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
