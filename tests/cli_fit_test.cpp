@@ -159,6 +159,22 @@ TEST(CliFit, BadInputGivesOneLineAndExitTwo) {
   r = runFlarekit({"fit", (dir / "plain.exr").string(), "--out", (dir / "m.json").string()});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("angle"), std::string::npos) << r.err;
+  // A focal length that is not a positive number, in the manifest or as an option.
+  {
+    TempDir bad;
+    writeCapture(bad / "capture", 4);
+    auto m = nlohmann::json::parse(std::ifstream(bad / "capture/manifest.json"));
+    m["lens"]["focal_length_mm"] = -50;
+    std::ofstream(bad / "capture/manifest.json", std::ios::trunc) << m.dump(2);
+    r = runFlarekit({"fit", (bad / "capture").string(), "--out", (bad / "m.json").string()});
+    EXPECT_EQ(r.exit_code, 2);
+    EXPECT_EQ(lineCount(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find("lens.focal_length_mm"), std::string::npos) << r.err;
+    r = runFlarekit({"fit", (dir / "capture/frames/frame_0000.exr").string(), "--out", (bad / "m.json").string(),
+                     "--focal-length-mm", "-50"});
+    EXPECT_EQ(r.exit_code, 2);
+    EXPECT_NE(r.err.find("--focal-length-mm"), std::string::npos) << r.err;
+  }
   // An unknown optimizer.
   r = runFlarekit({"fit", (dir / "capture").string(), "--out", (dir / "m.json").string(),
                    "--optimizer", "newton"});
