@@ -219,14 +219,18 @@ TEST(BuildFlareModel, RangesReachHalfwayToTheNeighbouringFrames) {
   EXPECT_NEAR(m.ghosts[0].parameters[model::param::kMx].evaluate(2.2), 122, 1e-9);
 }
 
-TEST(FitCapture, RecoversMovingGhostsInMemory) {
+// An empty grey stack of 160 × 100 frames 0.25° apart, for the frames the tests below draw.
+FrameStack testStack() {
   FrameStack stack;
   stack.size = {160, 100};
   stack.channels = 1;
-  stack.info.camera = stack.info.lens = stack.info.light = "test";
-  stack.info.f_number = stack.info.iso = stack.info.exposure_s = stack.info.pixel_pitch_um = 1;
-  stack.info.angle_step_deg = 0.25;
+  stack.info = testCapture(0.25);
   stack.info.image_size = stack.size;
+  return stack;
+}
+
+TEST(FitCapture, RecoversMovingGhostsInMemory) {
+  FrameStack stack = testStack();
   cv::theRNG().state = 5;
   for (int i = 0; i < 9; ++i) {
     const double theta = 0.25 * i;
@@ -266,13 +270,7 @@ TEST(FitCapture, RecoversMovingGhostsInMemory) {
 // where it stands clear of the light into the light, towards the image centre, as bright as it
 // was, and the report marks those frames as carried.
 TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
-  FrameStack stack;
-  stack.size = {160, 100};
-  stack.channels = 1;
-  stack.info.camera = stack.info.lens = stack.info.light = "test";
-  stack.info.f_number = stack.info.iso = stack.info.exposure_s = stack.info.pixel_pitch_um = 1;
-  stack.info.angle_step_deg = 0.25;
-  stack.info.image_size = stack.size;
+  FrameStack stack = testStack();
   cv::theRNG().state = 7;
   const cv::Point2d centre(80, 50);
   for (int i = 0; i < 13; ++i) {
