@@ -698,8 +698,12 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       return;
     }
     const int nfx = (tw + F - 1) / F, nfy = (th + F - 1) / F;
-    std::vector<std::vector<const RasterTriangle*>> fine(static_cast<size_t>(nfx) * static_cast<size_t>(nfy));
-    for (size_t k = begin; k < end; ++k) {
+    // A coarse tile of one fine tile (as with the default sizes) keeps its triangles as they are:
+    // dealing them out would only copy its list, in a pass over the triangles themselves (from
+    // memory, for the Nikon 28-75's 1.9 M).
+    const bool single = nfx * nfy == 1;
+    std::vector<std::vector<const RasterTriangle*>> fine(single ? 0 : static_cast<size_t>(nfx) * static_cast<size_t>(nfy));
+    for (size_t k = begin; k < end && !single; ++k) {
       const RasterTriangle& t = batches[refs[k].batch][refs[k].index];
       const int fx0 = (std::max(t.x0, tx0) - tx0) / F, fx1 = (std::min(t.x1, tx0 + tw - 1) - tx0) / F;
       const int fy0 = (std::max(t.y0, ty0) - ty0) / F, fy1 = (std::min(t.y1, ty0 + th - 1) - ty0) / F;
@@ -721,18 +725,23 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
     const size_t area = static_cast<size_t>(stride) * static_cast<size_t>(F);
     tbb::parallel_for(0, nfx * nfy, [&](int f) {
       const int i = f % nfx, j = f / nfx;
-      const auto& list = fine[static_cast<size_t>(f)];
       const int fx = tx0 + i * F, fy = ty0 + j * F;
       const int fx1 = std::min(tx0 + tw, fx + F) - 1, fy1 = std::min(ty0 + th, fy + F) - 1;
-      if (list.empty()) {
+      if (!single && fine[static_cast<size_t>(f)].empty()) {
         zeroPixels(fx, fy, fx1, fy1);
         return;
       }
       std::vector<float> r(area, 0.0f), g(area, 0.0f), b(area, 0.0f);
       const Planes p{r.data(), g.data(), b.data(), stride, fx, fy};
-      for (const RasterTriangle* t : list)
-        rasterizeInto(*t, aperture, std::max(t->x0, fx), std::min(t->x1, fx1), std::max(t->y0, fy),
-                      std::min(t->y1, fy1), p);
+      auto draw = [&](const RasterTriangle& t) {
+        rasterizeInto(t, aperture, std::max(t.x0, fx), std::min(t.x1, fx1), std::max(t.y0, fy),
+                      std::min(t.y1, fy1), p);
+      };
+      if (single) {
+        for (size_t k = begin; k < end; ++k) draw(batches[refs[k].batch][refs[k].index]);
+      } else {
+        for (const RasterTriangle* t : fine[static_cast<size_t>(f)]) draw(*t);
+      }
       for (int y = fy; y <= fy1; ++y) {
         auto* dst = image->ptr<cv::Vec3f>(y);
         const size_t o = static_cast<size_t>(y - fy) * static_cast<size_t>(stride);
