@@ -85,8 +85,13 @@ RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
   if (options.f_number > 0) s.lens = stopDown(s.lens, options.f_number);
   s.coatings = surfaceCoatings(s.lens, options);
   s.samples = spectralSamples(options.spectral_samples);
-  for (const auto& sample : s.samples)
-    s.tables.emplace_back(s.lens, s.coatings, sample.wavelength_nm);
+  // The wavelengths' reflectance tables in parallel: thin-film reflectances of every surface at
+  // 129 angles each, most of this function's 0.27 ms (Heliar, one thread), which the matrix
+  // renderer waited for on one core.
+  s.tables.resize(s.samples.size());
+  tbb::parallel_for(size_t{0}, s.samples.size(), [&](size_t i) {
+    s.tables[i] = ReflectanceTables(s.lens, s.coatings, s.samples[i].wavelength_nm);
+  });
   s.mapping.width_px = options.width_px;
   s.mapping.height_px = options.height_px;
   s.mapping.pixel_pitch_mm = std::min(options.sensor_width_mm / options.width_px,
