@@ -104,6 +104,7 @@ struct Block {
   // ray missed the sphere), oriented unit normal and cos(incidence), reflectance.
   alignas(64) double s[kBlock], disc[kBlock], miss[kBlock];
   alignas(64) double tir[kBlock];  // 1 = past the critical angle
+  alignas(64) double reached[kBlock];  // 1 = reached the sensor (reachSensor)
   alignas(64) double nx[kBlock], ny[kBlock], nz[kBlock], cos_i[kBlock];
   alignas(64) float refl[kBlock];
   // Scratch of the reflectance lookup: table index, interpolation weight, the two samples.
@@ -367,8 +368,8 @@ int dropBlocked(Block& b, int live, int* ray, TracedRays* out, int first) {
 }
 
 // Moves every ray of the block that heads for the sensor (alive, d_z > 0) to the sensor plane,
-// and marks in b.miss those that reach it at a finite position (|x|, |y| < 1e6 mm); the others
-// get x = y = 0. (A vector loop: its division was one a ray in the scalar write-out.)
+// and marks in b.reached those that reach it at a finite position (|x|, |y| < 1e6 mm); the
+// others get x = y = 0. (A vector loop: its division was one a ray in the scalar write-out.)
 FLAREKIT_VECTOR_LOOP void reachSensor(double z_sensor, Block& b, int count) {
 #pragma GCC ivdep
   for (int k = 0; k < count; ++k) {
@@ -380,7 +381,7 @@ FLAREKIT_VECTOR_LOOP void reachSensor(double z_sensor, Block& b, int count) {
     const bool reached = heading & (std::abs(x) < 1e6) & (std::abs(y) < 1e6);
     b.px[k] = x;
     b.py[k] = y;
-    b.miss[k] = reached ? 1.0 : 0.0;
+    b.reached[k] = reached ? 1.0 : 0.0;
   }
 }
 
@@ -421,7 +422,7 @@ void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Orig
         writeDead(out, o);
         continue;
       }
-      const bool reached = b.miss[k] != 0.0;
+      const bool reached = b.reached[k] != 0.0;
       out->alive[o] = reached ? 1 : 0;
       out->x_mm[o] = static_cast<float>(b.px[k]);
       out->y_mm[o] = static_cast<float>(b.py[k]);
