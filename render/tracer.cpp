@@ -104,6 +104,7 @@ struct Block {
   // ray missed the sphere), oriented unit normal and cos(incidence), reflectance.
   alignas(64) double s[kBlock], disc[kBlock], miss[kBlock];
   alignas(64) double tir[kBlock];  // 1 = past the critical angle
+  alignas(64) double reached[kBlock];  // 1 = reached the sensor (reachSensor)
   alignas(64) double nx[kBlock], ny[kBlock], nz[kBlock], cos_i[kBlock];
   alignas(64) float refl[kBlock];
   // Scratch of the reflectance lookup: table index, interpolation weight, the two samples.
@@ -366,18 +367,37 @@ int dropBlocked(Block& b, int live, int* ray, TracedRays* out, int first) {
   return j;
 }
 
-// Traces rays [0, count) whose origins `origin(k, &x, &y)` gives, into `out` from `offset` on.
-// `passing_only`: rays certain to be blocked (past a rim or outside the stop circle) are dropped
-// as soon as they are half of a block, and reported dead.
-template <typename Origin>
-void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Origin origin,
+// Moves every ray of the block that heads for the sensor (alive, d_z > 0) to the sensor plane,
+// and marks in b.reached those that reach it at a finite position (|x|, |y| < 1e6 mm); the
+// others get x = y = 0. (A vector loop: its division was one a ray in the scalar write-out.)
+FLAREKIT_VECTOR_LOOP void reachSensor(double z_sensor, Block& b, int count) {
+#pragma GCC ivdep
+  for (int k = 0; k < count; ++k) {
+    const bool heading = (b.alive[k] != 0.0) & (b.dz[k] > 1e-9);
+    const double s = (z_sensor - b.pz[k]) / b.dz[k];
+    const double x = heading ? b.px[k] + s * b.dx[k] : 0.0;
+    const double y = heading ? b.py[k] + s * b.dy[k] : 0.0;
+    // NaN and infinities fail the comparisons too.
+    const bool reached = heading & (std::abs(x) < 1e6) & (std::abs(y) < 1e6);
+    b.px[k] = x;
+    b.py[k] = y;
+    b.reached[k] = reached ? 1.0 : 0.0;
+  }
+}
+
+// Traces rays [0, count), the origins of rays [first, first + m) written by
+// `origins(first, m, x, y)`, into `out` from `offset` on. `passing_only`: rays certain to be
+// blocked (past a rim or outside the stop circle) are dropped as soon as they are half of a
+// block, and reported dead.
+template <typename Origins>
+void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Origins origins,
                  TracedRays* out, int offset, bool passing_only = false) {
   Block b;
   int ray[kBlock];
   for (int start = 0; start < count; start += kBlock) {
     const int m = std::min(kBlock, count - start);
+    origins(start, m, b.px, b.py);
     for (int k = 0; k < m; ++k) {
-      origin(start + k, &b.px[k], &b.py[k]);
       b.pz[k] = 0.0;
       b.dx[k] = dir[0];
       b.dy[k] = dir[1];
@@ -395,29 +415,57 @@ void traceBlocks(const CompiledPath& path, const cv::Vec3d& dir, int count, Orig
       if (passing_only) live = dropBlocked(b, live, ray, out, offset + start);
       if (live == 0) break;
     }
+    reachSensor(path.z_sensor, b, live);
     for (int k = 0; k < live; ++k) {
       const size_t o = static_cast<size_t>(offset + start + ray[k]);
-      bool ok = b.alive[k] != 0.0 && b.dz[k] > 1e-9;
-      double x = 0, y = 0;
-      if (ok) {
-        const double s = (path.z_sensor - b.pz[k]) / b.dz[k];
-        x = b.px[k] + s * b.dx[k];
-        y = b.py[k] + s * b.dy[k];
-        ok = std::isfinite(x) && std::isfinite(y) && std::abs(x) < 1e6 && std::abs(y) < 1e6;
-      }
       if (b.alive[k] == 0.0) {  // a dead ray's state is meaningless (see above)
         writeDead(out, o);
         continue;
       }
-      out->alive[o] = ok ? 1 : 0;
-      out->x_mm[o] = static_cast<float>(x);
-      out->y_mm[o] = static_cast<float>(y);
+      const bool reached = b.reached[k] != 0.0;
+      out->alive[o] = reached ? 1 : 0;
+      out->x_mm[o] = static_cast<float>(b.px[k]);
+      out->y_mm[o] = static_cast<float>(b.py[k]);
       out->u[o] = static_cast<float>(b.u[k]);
       out->v[o] = static_cast<float>(b.v[k]);
       out->r_rel[o] = static_cast<float>(std::min(b.rr[k], 1e6));
-      out->transmission[o] = ok ? static_cast<float>(b.t[k]) : 0.f;
+      out->transmission[o] = reached ? static_cast<float>(b.t[k]) : 0.f;
     }
   }
+}
+
+// Traces `grid_count` grids of one size (grids[g].n = n for all g) one after another, in full
+// blocks: grid g's rays from index g·n² on (out->n = n). A refined cell's small grid is thus part
+// of a block, not one of its own per grid or row.
+void traceGridList(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid* grids,
+                   int grid_count, TracedRays* out, bool passing_only) {
+  const int n = grids[0].n, nn = n * n;
+  out->n = n;
+  out->resize(nn * grid_count);
+  // Origins made on the fly, a block at a time, walking the grids' columns and rows (no integer
+  // division a ray, and the spacing's division once a grid).
+  traceBlocks(
+      path, dir, nn * grid_count,
+      [&](int first, int m, double* x, double* y) {
+        int g = first / nn, i = first % nn % n, j = first % nn / n;
+        double x_first = 0.0, y_first = 0.0, h = 0.0;
+        auto enter = [&](const RayGrid& grid) {
+          x_first = grid.center_x_mm - grid.half_size_mm;
+          y_first = grid.center_y_mm - grid.half_size_mm;
+          h = grid.spacing_mm();
+        };
+        enter(grids[g]);
+        for (int k = 0; k < m; ++k) {
+          x[k] = x_first + i * h;
+          y[k] = y_first + j * h;
+          if (++i < n) continue;
+          i = 0;
+          if (++j < n) continue;
+          j = 0;
+          if (++g < grid_count) enter(grids[g]);
+        }
+      },
+      out, 0, passing_only);
 }
 
 }  // namespace
@@ -426,30 +474,16 @@ void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0,
                int count, TracedRays* out, int offset) {
   traceBlocks(
       path, dir, count,
-      [&](int k, double* x, double* y) {
-        *x = x0[k];
-        *y = y0[k];
+      [&](int first, int m, double* x, double* y) {
+        std::copy_n(x0 + first, m, x);
+        std::copy_n(y0 + first, m, y);
       },
       out, offset);
 }
 
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
                TracedRays* out, bool passing_only) {
-  const int n = grid.n;
-  out->n = n;
-  out->resize(n * n);
-  // The whole grid in full blocks (a refined cell's small grid is one block, not one per row),
-  // origins made on the fly.
-  const double h = grid.spacing_mm();
-  const double x_first = grid.center_x_mm - grid.half_size_mm;
-  const double y_first = grid.center_y_mm - grid.half_size_mm;
-  traceBlocks(
-      path, dir, n * n,
-      [&](int k, double* x, double* y) {
-        *x = x_first + (k % n) * h;
-        *y = y_first + (k / n) * h;
-      },
-      out, 0, passing_only);
+  traceGridList(path, dir, &grid, 1, out, passing_only);
 }
 
 void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,
@@ -458,19 +492,7 @@ void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vecto
     out->resize(0);
     return;
   }
-  const int n = grids.front().n, nn = n * n;
-  out->n = n;
-  out->resize(nn * static_cast<int>(grids.size()));
-  traceBlocks(
-      path, dir, nn * static_cast<int>(grids.size()),
-      [&](int k, double* x, double* y) {
-        const RayGrid& g = grids[static_cast<size_t>(k / nn)];
-        const int l = k % nn;
-        const double h = g.spacing_mm();
-        *x = (g.center_x_mm - g.half_size_mm) + (l % n) * h;
-        *y = (g.center_y_mm - g.half_size_mm) + (l / n) * h;
-      },
-      out, 0);
+  traceGridList(path, dir, grids.data(), static_cast<int>(grids.size()), out, false);
 }
 
 bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,

@@ -27,6 +27,7 @@ namespace flarekit::render {
 class ReflectanceTables {
  public:
   static constexpr int kSamples = 129;
+  ReflectanceTables() = default;  // no surfaces (for assigning to)
   ReflectanceTables(const Lens& lens, const std::vector<SurfaceCoating>& coatings,
                     double wavelength_nm);
   // R(cos θ) of surface i for light arriving travelling forward (from the object side) or back.
