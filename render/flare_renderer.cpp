@@ -8,6 +8,7 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include "common/error.h"
 #include "render/ghost_render.h"
@@ -158,7 +159,8 @@ void FlareRenderer::render(const Lens& lens, const LightDirection& light,
   if (options.same_side_of_stop_only)
     ghosts.erase(std::remove_if(ghosts.begin(), ghosts.end(), [](const Ghost& g) { return !g.same_side_of_stop; }),
                  ghosts.end());
-  for (Ghost& g : ghosts) g.intensity_estimate = ghostIntensityEstimate(setup, g);
+  tbb::parallel_for(size_t{0}, ghosts.size(),
+                    [&](size_t i) { ghosts[i].intensity_estimate = ghostIntensityEstimate(setup, ghosts[i]); });
   std::stable_sort(ghosts.begin(), ghosts.end(),
                    [](const Ghost& a, const Ghost& b) { return a.intensity_estimate > b.intensity_estimate; });
   if (!ghosts.empty() && options.min_relative_intensity > 0) {
@@ -170,6 +172,14 @@ void FlareRenderer::render(const Lens& lens, const LightDirection& light,
     ghosts.resize(static_cast<size_t>(options.max_ghosts));
   summary.ghosts_rendered = static_cast<int>(ghosts.size());
   const int ns = static_cast<int>(setup.samples.size());
+
+  // The wavelengths' direct light (the light's own image and where it lands: a bound and a 48²
+  // grid each, as long as the whole matrix render otherwise) is traced beside the ghosts, as tasks
+  // that idle threads take up; it is used in wavelength order below.
+  std::vector<DirectLight> direct(static_cast<size_t>(ns));
+  tbb::task_group direct_tasks;
+  for (int s = 0; s < ns; ++s)
+    direct_tasks.run([&, s] { direct[static_cast<size_t>(s)] = traceDirectLight(setup, s); });
 
   std::vector<std::vector<RasterTriangle>>& batches = scratch_->batches;
   for (auto& b : batches) b.clear();
@@ -229,10 +239,7 @@ void FlareRenderer::render(const Lens& lens, const LightDirection& light,
                             : std::hypot(options.width_px, options.height_px) / 8.0;
   cv::Mat pattern;
   if (options.light_source && options.starburst) pattern = starburstPattern(setup.aperture, 256);
-  // The wavelengths' direct light traced in parallel (a bound and a 48² grid each: as long as the
-  // whole matrix render otherwise), used in order.
-  std::vector<DirectLight> direct(static_cast<size_t>(ns));
-  tbb::parallel_for(0, ns, [&](int s) { direct[static_cast<size_t>(s)] = traceDirectLight(setup, s); });
+  direct_tasks.wait();
   for (int s = 0; s < ns; ++s) {
     const DirectLight& d = direct[static_cast<size_t>(s)];
     if (!d.valid) continue;
