@@ -249,13 +249,6 @@ double outlineIoU(const GhostParameters& a, const GhostParameters& b) {
   return joint > 0 ? overlap / joint : 0.0;
 }
 
-// The ghost's parameters at θ from its polynomials, within bounds.
-GhostParameters evaluateTrack(const model::GhostTrack& g, int channels, double angle) {
-  std::vector<double> v;
-  for (const auto& p : g.parameters) v.push_back(p.evaluate(angle));
-  return model::clampToBounds(model::fromParameterVector(v, channels));
-}
-
 // Refits the Ib and Ii polynomials of `g` (the other parameters' polynomials fixed) in image
 // space: the intensity transfer is linear in Ib and Ii (model/intensity.h), so the coefficients
 // that bring the model's ghost closest, in least squares over pixels, to the fit of every frame in
@@ -291,7 +284,7 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
     FrameImages f;
     const GhostParameters fit = t.fits[i];
     f.target = model::renderGhosts(std::span(&fit, 1), size, channels, render, view);
-    GhostParameters shape = evaluateTrack(g, channels, t.angles_deg[i]);
+    GhostParameters shape = g.at(t.angles_deg[i], channels);
     shape.channels = 1;
     shape.border = {1, 0, 0};
     shape.inside = {0, 0, 0};

@@ -237,14 +237,16 @@ void FlareModel::save(const std::filesystem::path& path) const {
   writeJsonFile(path, toJson());
 }
 
+GhostParameters GhostTrack::at(double angle_deg, int channels) const {
+  std::vector<double> v(parameters.size());
+  for (size_t k = 0; k < v.size(); ++k) v[k] = parameters[k].evaluate(angle_deg);
+  return clampToBounds(fromParameterVector(v, channels));
+}
+
 std::vector<GhostAtAngle> FlareModel::ghostsAt(double angle_deg) const {
   std::vector<GhostAtAngle> out;
-  for (const GhostTrack& g : ghosts) {
-    if (!g.covers(angle_deg)) continue;
-    std::vector<double> v(g.parameters.size());
-    for (size_t k = 0; k < v.size(); ++k) v[k] = g.parameters[k].evaluate(angle_deg);
-    out.push_back({g.id, clampToBounds(fromParameterVector(v, channels))});
-  }
+  for (const GhostTrack& g : ghosts)
+    if (g.covers(angle_deg)) out.push_back({g.id, g.at(angle_deg, channels)});
   return out;
 }
 

@@ -82,6 +82,8 @@ struct GhostTrack {
   std::vector<Polynomial> parameters;
 
   bool covers(double angle_deg) const { return angle_deg >= angle_min_deg && angle_deg <= angle_max_deg; }
+  // Its parameters at θ (degrees; range not checked), clamped to the parameters' bounds.
+  GhostParameters at(double angle_deg, int channels) const;
 };
 
 // A ghost evaluated at one angle.
