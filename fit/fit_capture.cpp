@@ -582,10 +582,10 @@ class CaptureFitter {
   std::optional<GhostParameters> carriedInto(const Track& t, int pos) {
     const LightImage& light = lightOf(pos);
     if (!light.found) return std::nullopt;
-    auto clear = [&](int p, const GhostParameters& g) {
-      const LightImage& l = lightOf(p);
-      return !l.found || std::hypot(g.center_x - l.center.x, g.center_y - l.center.y) >
-                             std::max({g.left, g.right, g.height}) + l.zone_radius_px;
+    // Within its size of the light's zone (the light found in that frame).
+    auto inLight = [](const GhostParameters& g, const LightImage& l) {
+      return l.found && std::hypot(g.center_x - l.center.x, g.center_y - l.center.y) <=
+                            std::max({g.left, g.right, g.height}) + l.zone_radius_px;
     };
     const cv::Point2d c0(0.5 * stack_.size.width, 0.5 * stack_.size.height);
     cv::Point2d kt(0, 0);
@@ -593,7 +593,7 @@ class CaptureFitter {
     int n = 0;
     const GhostParameters* nearest = nullptr;
     for (const auto& [p, g] : t.fits) {
-      if (t.carried.count(p) || !clear(p, g)) continue;
+      if (t.carried.count(p) || inLight(g, lightOf(p))) continue;
       if (!nearest) nearest = &g;
       kt += angle(p) * (cv::Point2d(g.center_x, g.center_y) - c0);
       tt += angle(p) * angle(p);
@@ -604,8 +604,7 @@ class CaptureFitter {
     const cv::Point2d centre = c0 + (angle(pos) / tt) * kt;
     g.center_x = centre.x;
     g.center_y = centre.y;
-    const double reach = std::max({g.left, g.right, g.height}) + light.zone_radius_px;
-    if (std::hypot(g.center_x - light.center.x, g.center_y - light.center.y) > reach) return std::nullopt;
+    if (!inLight(g, light)) return std::nullopt;
     return g;
   }
 
