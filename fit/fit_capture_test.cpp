@@ -19,6 +19,17 @@ model::CaptureInfo testCapture(double angle_step_deg = 1) {
   return info;
 }
 
+// Appends one fitted frame to a hand-made track, with every per-frame record the fitter keeps
+// (explained, fitted, not carried).
+void addFrame(GhostTrackFit& t, double angle_deg, const model::GhostParameters& g) {
+  t.angles_deg.push_back(angle_deg);
+  t.fits.push_back(g);
+  t.residual_rms.push_back(0);
+  t.peak.push_back(1);
+  t.unexplained.push_back(false);
+  t.carried.push_back(false);
+}
+
 TEST(FitOptions, DefaultsAreValid) {
   std::string error;
   EXPECT_TRUE(FitOptions{}.IsValid(&error)) << error;
@@ -61,8 +72,7 @@ TEST(PolynomialInliers, LeaveOutOneWildFrameAndNothingElse) {
     model::GhostParameters g;
     g.center_x = 100 + 3 * i;
     g.inside = {v[i], 0, 0};
-    t.angles_deg.push_back(a[i]);
-    t.fits.push_back(g);
+    addFrame(t, a[i], g);
   }
   const model::CaptureInfo info = testCapture();
   const model::FlareModel m = buildFlareModel({t}, info, 1, 2);
@@ -97,11 +107,7 @@ TEST(BuildFlareModel, PolynomialsStayWithinBoundsAndAutoDegreeIsLowForLinearData
     g.center_y = 60;
     // Ii near its bound 0 and noisy: a degree-2 fit would dip below 0 inside the range.
     g.inside = {i % 2 ? 0.0 : 0.02, 0, 0};
-    t.angles_deg.push_back(0.2 * i);
-    t.fits.push_back(g);
-    t.residual_rms.push_back(0);
-    t.peak.push_back(1);
-    t.unexplained.push_back(false);
+    addFrame(t, 0.2 * i, g);
   }
   const model::CaptureInfo info = testCapture();
   for (int degree : {2, -1}) {
@@ -131,8 +137,7 @@ TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
     g.border = {i % 2 ? 0.003 : 0.02, 0, 0};
     g.outside_falloff = i % 2 ? 40 : 4;
     g.outside_exponent = i % 2 ? 2 : 1;
-    t.angles_deg.push_back(0.5 * i);
-    t.fits.push_back(g);
+    addFrame(t, 0.5 * i, g);
   }
   const model::CaptureInfo info = testCapture();
   const model::FlareModel m = buildFlareModel({t}, info, 1, 2);
@@ -171,9 +176,7 @@ TEST(SplitTracks, ATrackThatJumpsToAnotherGhostBecomesTwo) {
     g.center_y = 60;
     g.left = g.right = g.height = small ? 8 : 45;
     g.inside = {0.01, 0, 0};
-    t.angles_deg.push_back(0.5 * i);
-    t.fits.push_back(g);
-    t.unexplained.push_back(false);
+    addFrame(t, 0.5 * i, g);
   }
   const model::CaptureInfo info = testCapture();
   const auto split = splitTracksPolynomialsCannotFollow({t}, info, 1, 2, 3, 10);
@@ -202,8 +205,7 @@ TEST(BuildFlareModel, RangesReachHalfwayToTheNeighbouringFrames) {
       model::GhostParameters g;
       g.center_x = 100 + 10 * a;
       g.center_y = 60;
-      t.angles_deg.push_back(a);
-      t.fits.push_back(g);
+      addFrame(t, a, g);
     }
     return t;
   };
