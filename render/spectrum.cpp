@@ -1,5 +1,6 @@
 #include "render/spectrum.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace flarekit::render {
@@ -91,6 +92,22 @@ std::vector<SpectralSample> spectralSamples(int n) {
                                 static_cast<float>(rgb[2]))});
   }
   return out;
+}
+
+std::vector<BandWavelength> sampleBand(int spectral_samples, int index, double step_nm) {
+  const double lo = 380.0, hi = 780.0;
+  std::vector<BandWavelength> band;
+  if (spectral_samples <= 0) {
+    for (double l = lo; l <= hi + 1e-9; l += step_nm) {
+      const double w = xyzToLinearSrgb(cieColorMatching(l))[index];
+      if (w > 0) band.push_back({l, w});
+    }
+    return band;
+  }
+  const double bin = (hi - lo) / spectral_samples, b0 = lo + index * bin;
+  const int steps = std::max(1, static_cast<int>(std::floor(bin / step_nm)));
+  for (int k = 0; k < steps; ++k) band.push_back({b0 + (k + 0.5) * bin / steps, 1.0});
+  return band;
 }
 
 }  // namespace flarekit::render

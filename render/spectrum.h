@@ -27,4 +27,17 @@ cv::Vec3d cieColorMatching(double wavelength_nm);
 // XYZ → linear sRGB (IEC 61966-2-1).
 cv::Vec3d xyzToLinearSrgb(const cv::Vec3d& xyz);
 
+// One wavelength of the band a sample stands for, and its relative weight.
+struct BandWavelength {
+  double wavelength_nm = 550.0;
+  double weight = 1.0;
+};
+
+// The wavelengths sample `index` of spectralSamples(spectral_samples) stands for, every `step_nm`,
+// with relative weights: in the RGB mode its channel's colour-matching function in linear sRGB
+// (the positive part) over 380–780 nm, in the spectral mode its bin, evenly (at least the
+// sample's own wavelength). What a single traced wavelength cannot show and a band can: the
+// starburst's radial ringing, which blurs out over a real light's spectrum (Hullin 2011 §3.3).
+std::vector<BandWavelength> sampleBand(int spectral_samples, int index, double step_nm = 5.0);
+
 }  // namespace flarekit::render

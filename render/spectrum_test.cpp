@@ -47,5 +47,38 @@ TEST(Spectrum, FlatSpectrumIsNeutralWithUnitLuminance) {
   EXPECT_GT(red.rgb_weight[0], 10 * std::abs(red.rgb_weight[2]));
 }
 
+TEST(Spectrum, BandsCoverWhatEachSampleStandsFor) {
+  const auto mean_nm = [](const std::vector<BandWavelength>& band) {
+    double sw = 0, swl = 0;
+    for (const auto& b : band) {
+      EXPECT_GT(b.weight, 0);
+      EXPECT_GE(b.wavelength_nm, 380);
+      EXPECT_LE(b.wavelength_nm, 780);
+      sw += b.weight;
+      swl += b.weight * b.wavelength_nm;
+    }
+    return swl / sw;
+  };
+  // RGB mode: each channel's sRGB colour-matching function, 5 nm apart; red lies beyond green,
+  // green beyond blue (their positive lobes peak near 600, 530 and 450 nm).
+  const double r = mean_nm(sampleBand(0, 0)), g = mean_nm(sampleBand(0, 1)), b = mean_nm(sampleBand(0, 2));
+  EXPECT_GT(r, 580);
+  EXPECT_GT(r, g + 30);
+  EXPECT_GT(g, b + 30);
+  EXPECT_LT(b, 480);
+  EXPECT_GT(sampleBand(0, 1).size(), 20u);
+  // Spectral mode: sample k's bin, evenly; a bin narrower than the step is its own wavelength.
+  const auto s = spectralSamples(8);
+  for (int k = 0; k < 8; ++k) {
+    const auto band = sampleBand(8, k);
+    ASSERT_EQ(band.size(), 10u);  // 50 nm bins at 5 nm
+    EXPECT_NEAR(mean_nm(band), s[static_cast<size_t>(k)].wavelength_nm, 1e-9);
+    EXPECT_NEAR(band.front().wavelength_nm, 380 + 50 * k + 2.5, 1e-9);
+  }
+  const auto fine = sampleBand(200, 7);
+  ASSERT_EQ(fine.size(), 1u);
+  EXPECT_NEAR(fine[0].wavelength_nm, spectralSamples(200)[7].wavelength_nm, 1e-9);
+}
+
 }  // namespace
 }  // namespace flarekit::render

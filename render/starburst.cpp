@@ -1,5 +1,6 @@
 #include "render/starburst.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <opencv2/imgproc.hpp>
@@ -35,6 +36,30 @@ cv::Mat starburstPattern(const Aperture& aperture, int fft_size) {
   const double sum = cv::sum(shifted)[0];
   if (sum > 0) shifted /= sum;
   return shifted;
+}
+
+cv::Mat starburstBand(const cv::Mat& pattern, std::span<const BandWavelength> band, double* scale_nm) {
+  double longest = 0;
+  for (const BandWavelength& b : band) longest = std::max(longest, b.wavelength_nm);
+  *scale_nm = longest;
+  if (band.empty() || !(longest > 0)) return {};
+  cv::Mat sum(pattern.size(), CV_32FC1, cv::Scalar(0)), copy;
+  // The zero frequency is at index n/2 (starburstPattern) and stays there.
+  const double c = pattern.cols / 2;
+  for (const BandWavelength& b : band) {
+    if (!(b.weight > 0)) continue;
+    const double k = b.wavelength_nm / longest;
+    const cv::Matx23d stretch(k, 0, c * (1 - k), 0, k, c * (1 - k));
+    cv::warpAffine(pattern, copy, stretch, pattern.size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT,
+                   cv::Scalar(0));
+    // Each wavelength carries its weight of the flux whatever its scale (a shrunk copy's samples
+    // sum to about k² of the pattern's).
+    const double s = cv::sum(copy)[0];
+    if (s > 0) cv::scaleAdd(copy, b.weight / s, sum, sum);
+  }
+  const double total = cv::sum(sum)[0];
+  if (total > 0) sum /= total;
+  return sum;
 }
 
 void addStarburst(const cv::Mat& pattern, cv::Point2d center_px, double radius_px,
