@@ -119,7 +119,7 @@ std::string RenderSummary::BriefReport() const {
 struct FlareRenderer::Scratch {
   // Triangles of each (ghost, wavelength): cleared, not freed, so their capacity carries over.
   std::vector<std::vector<RasterTriangle>> batches;
-  RasterScratch raster;  // accumulation planes per thread
+  RasterScratch raster;  // the per-ghost rasterizer's buffers
   // Each wavelength's starburst (starburstBand), kept while the iris and the wavelengths stay the
   // same: the bands' 5 nm copies took 76 ms of a 640×427 RGB render, on every frame of a capture.
   struct Starburst {

@@ -3,10 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <mutex>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
 
 namespace flarekit::render {
 namespace {
@@ -445,11 +446,20 @@ void addPlanes(const float* r, const float* g, const float* b, int stride, int x
   }
 }
 
-// One batch into its own planar buffer over its bounding box, then added to `image`.
-void rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& aperture,
-                    cv::Mat* image, std::mutex* mutex, RasterScratch* scratch) {
-  if (tris.empty()) return;
-  int x0 = image->cols, y0 = image->rows, x1 = -1, y1 = -1;
+// One batch into its own planar buffer over its bounding box: the box and three planes of
+// `stride` floats a row, in `*storage` (zeroed and grown as needed). w = 0 when the batch is empty.
+struct BatchPlanes {
+  int x0 = 0, y0 = 0, w = 0, h = 0, stride = 0;
+  const float* r = nullptr;
+  const float* g = nullptr;
+  const float* b = nullptr;
+};
+
+BatchPlanes rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& aperture,
+                           cv::Size image, std::vector<float>* storage) {
+  BatchPlanes out;
+  if (tris.empty()) return out;
+  int x0 = image.width, y0 = image.height, x1 = -1, y1 = -1;
   for (const RasterTriangle& t : tris) {
     x0 = std::min(x0, t.x0);
     y0 = std::min(y0, t.y0);
@@ -459,33 +469,26 @@ void rasterizeBatch(const std::vector<RasterTriangle>& tris, const Aperture& ape
   const int w = x1 - x0 + 1, h = y1 - y0 + 1;
   const int stride = (w + kChunk - 1) / kChunk * kChunk;
   const size_t size = static_cast<size_t>(stride) * static_cast<size_t>(h);
-  std::vector<float> own;
-  float* r;
-  if (scratch) {
-    r = scratch->zeroedPlanes(size);
-  } else {
-    own.assign(3 * size, 0.0f);
-    r = own.data();
-  }
+  if (storage->size() < 3 * size) storage->resize(3 * size);
+  std::fill(storage->begin(), storage->begin() + static_cast<std::ptrdiff_t>(3 * size), 0.0f);
+  float* r = storage->data();
   float* g = r + size;
   float* b = g + size;
   const Planes p{r, g, b, stride, x0, y0};
   for (const RasterTriangle& t : tris) rasterizeInto(t, aperture, t.x0, t.x1, t.y0, t.y1, p);
-  if (mutex) {
-    std::lock_guard<std::mutex> lock(*mutex);
-    addPlanes(r, g, b, stride, x0, y0, w, h, image);
-  } else {
-    addPlanes(r, g, b, stride, x0, y0, w, h, image);
-  }
+  out = {x0, y0, w, h, stride, r, g, b};
+  return out;
+}
+
+void addBatch(const BatchPlanes& p, cv::Mat* image) {
+  if (p.w > 0) addPlanes(p.r, p.g, p.b, p.stride, p.x0, p.y0, p.w, p.h, image);
 }
 
 }  // namespace
 
-float* RasterScratch::zeroedPlanes(size_t size) {
-  std::vector<float>& planes = planes_.local();
-  if (planes.size() < 3 * size) planes.resize(3 * size);
-  std::fill(planes.begin(), planes.begin() + static_cast<std::ptrdiff_t>(3 * size), 0.0f);
-  return planes.data();
+std::vector<float>& RasterScratch::buffer(size_t slot) {
+  if (buffers_.size() <= slot) buffers_.resize(slot + 1);
+  return buffers_[slot];
 }
 
 bool TileOptions::IsValid(std::string* error) const {
@@ -617,19 +620,48 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
 
 void rasterizeBatches(const std::vector<std::vector<RasterTriangle>>& batches,
                       const std::vector<bool>* keep, const Aperture& aperture, cv::Mat* image) {
+  std::vector<float> storage;
   for (size_t b = 0; b < batches.size(); ++b) {
     if (keep && !(*keep)[b]) continue;
-    rasterizeBatch(batches[b], aperture, image, nullptr, nullptr);
+    addBatch(rasterizeBatch(batches[b], aperture, image->size(), &storage), image);
   }
 }
 
 void rasterizePerGhost(const std::vector<std::vector<RasterTriangle>>& batches,
                        const Aperture& aperture, cv::Mat* image, RasterScratch* scratch) {
-  // Hullin's one-ghost-at-a-time pass: each batch into its own buffer over its bounding box,
-  // blended additively into the frame (parallel over batches).
-  std::mutex mutex;
-  tbb::parallel_for(size_t{0}, batches.size(),
-                    [&](size_t b) { rasterizeBatch(batches[b], aperture, image, &mutex, scratch); });
+  // Hullin's one-ghost-at-a-time pass: each batch into its own buffer over its bounding box, in
+  // parallel, added to the frame in batch order. (Added as the threads finished, under a mutex,
+  // the same frame differed in its last bits from run to run.) A pipeline of `tokens` batches in
+  // flight: the adding stage takes them in order, so the batch of sequence number n + tokens
+  // starts only after batch n was added, and slot n mod tokens is free for it.
+  const size_t tokens = 2 * static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  RasterScratch own;
+  RasterScratch& buffers = scratch ? *scratch : own;
+  for (size_t slot = 0; slot < tokens; ++slot) buffers.buffer(slot);  // grown here, not in the stages
+  struct Item {
+    size_t batch = 0, sequence = 0;
+    BatchPlanes planes;
+  };
+  size_t next = 0, sequence = 0;
+  tbb::parallel_pipeline(
+      tokens,
+      tbb::make_filter<void, Item>(tbb::filter_mode::serial_in_order,
+                                   [&](tbb::flow_control& control) {
+                                     while (next < batches.size() && batches[next].empty()) ++next;
+                                     if (next == batches.size()) {
+                                       control.stop();
+                                       return Item{};
+                                     }
+                                     return Item{next++, sequence++, {}};
+                                   }) &
+          tbb::make_filter<Item, Item>(tbb::filter_mode::parallel,
+                                       [&](Item item) {
+                                         item.planes = rasterizeBatch(batches[item.batch], aperture, image->size(),
+                                                                      &buffers.buffer(item.sequence % tokens));
+                                         return item;
+                                       }) &
+          tbb::make_filter<Item, void>(tbb::filter_mode::serial_in_order,
+                                       [&](const Item& item) { addBatch(item.planes, image); }));
 }
 
 void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,

@@ -13,7 +13,6 @@
 #include <vector>
 
 #include <opencv2/core.hpp>
-#include <tbb/enumerable_thread_specific.h>
 
 #include "render/aperture.h"
 #include "render/tracer.h"
@@ -76,22 +75,23 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
 float shadeTriangle(const RasterTriangle& t, const Aperture& aperture, float x, float y);
 
 // Working memory the rasterizers keep between calls when given one (FlareRenderer holds one per
-// renderer): accumulation planes per thread, whose pages stay mapped from frame to frame. A
-// per-ghost buffer covers the ghost's bounding box, up to the whole frame (3.7 MB a plane at
-// 1280×720): allocated afresh per batch, the Heliar's 84 batches took 20–170 k page faults a
-// frame. One call at a time per RasterScratch.
+// renderer): the per-ghost buffers, whose pages stay mapped from frame to frame. A per-ghost
+// buffer covers the ghost's bounding box, up to the whole frame (3.7 MB a plane at 1280×720):
+// allocated afresh per batch, the Heliar's 84 batches took 20–170 k page faults a frame. One call
+// at a time per RasterScratch.
 class RasterScratch {
  public:
-  // Three zeroed planes of `size` floats for the calling thread (valid until its next call).
-  float* zeroedPlanes(size_t size);
+  // Buffer number `slot` (created empty the first time; the caller sizes it).
+  std::vector<float>& buffer(size_t slot);
 
  private:
-  tbb::enumerable_thread_specific<std::vector<float>> planes_;
+  std::vector<std::vector<float>> buffers_;
 };
 
 // Reference: rasterizes one batch after another, each into its own buffer over its bounding
-// box, added to `image` (CV_32FC3, must have the mapping's size). Parallel over batches. The
-// buffers come from `scratch` when given (same image either way).
+// box, added to `image` (CV_32FC3, must have the mapping's size) in batch order. Parallel over
+// batches; the same image whatever the threads. The buffers come from `scratch` when given (same
+// image either way).
 void rasterizePerGhost(const std::vector<std::vector<RasterTriangle>>& batches,
                        const Aperture& aperture, cv::Mat* image, RasterScratch* scratch = nullptr);
 
