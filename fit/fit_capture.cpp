@@ -15,7 +15,6 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
-#include <tbb/task_group.h>
 
 #include "common/error.h"
 #include "common/image.h"
@@ -516,7 +515,6 @@ struct SolveStats {
   double cost = 0;
   long long evaluations = 0;
   int iterations = 0;
-  int resolves = 0;  // groups solved again (solveFrame)
 };
 
 // The same parameters bit for bit (not ==, which takes −0 for +0).
@@ -559,9 +557,7 @@ class CaptureFitter {
     }
     progress.finish();
     if (logLevel() >= LogLevel::kDebug)
-      logDebug("fit: " + std::to_string(group_resolves_) + " ghost group(s) solved again (others moved onto them); " +
-               std::to_string(speculation_hits_) + " frame(s) solved during the previous one's detection used, " +
-               std::to_string(speculation_misses_) + " solved again (detection found a ghost)");
+      logDebug("fit: " + std::to_string(group_resolves_) + " ghost group(s) solved again (others moved onto them)");
     return finish(since(t0));
   }
 
@@ -637,45 +633,6 @@ class CaptureFitter {
     return "";
   }
 
-  // The ghosts fitted in frame `pos` (their track ids and seeds), from the tracks as they stand.
-  void frameGhosts(int pos, bool forward, std::vector<int>& ids, std::vector<GhostParameters>& ghosts) const {
-    for (const auto& t : tracks_) {
-      if (forward) {
-        if (t.ended_high || t.fits.empty()) continue;
-        if (t.fits.rbegin()->first >= pos) continue;
-        ghosts.push_back(seedFor(t, pos));
-      } else {
-        auto it = t.fits.find(pos);
-        if (it != t.fits.end()) {
-          ghosts.push_back(it->second);
-        } else {
-          if (t.ended_low || t.fits.empty() || t.fits.begin()->first < pos) continue;
-          ghosts.push_back(seedFor(t, pos));
-        }
-      }
-      ids.push_back(t.id);
-    }
-  }
-
-  // The data the ghosts of frame `pos` are fitted to. Backward, a frame no track is extended onto
-  // is refitted all the same: its forward fit came, near a key frame, from a rough detection seed
-  // (skipping these refits cost the 12-frame CLI hold-out test 62 → 16 dB).
-  std::unique_ptr<FramePyramid> dataFor(int pos) {
-    return std::make_unique<FramePyramid>(withoutLight(pos), frame(pos).valid, edge_, noiseOf(pos));
-  }
-
-  // A frame solved ahead of its turn (while the frame before it detects): the ghosts it was
-  // solved from and the result. Used when the frame's own ghosts turn out the same bit for bit.
-  struct Speculation {
-    Speculation(int p, std::unique_ptr<FramePyramid> d) : pos(p), data(std::move(d)) {}
-    int pos;
-    std::unique_ptr<FramePyramid> data;
-    std::vector<int> ids;
-    std::vector<GhostParameters> ghosts, fitted;
-    SolveStats stats;
-    bool failed = false;
-  };
-
   // Fits `ghosts` jointly per overlapping group; updates them in place.
   SolveStats solveFrame(const FramePyramid& data, std::vector<GhostParameters>& ghosts) {
     SolveStats stats;
@@ -737,7 +694,7 @@ class CaptureFitter {
             break;
           }
       if (!same_others) {
-        ++stats.resolves;
+        ++group_resolves_;
         solved[j] = solve(groups[j], ghosts);
       }
       const GroupFitResult& r = solved[j].result;
@@ -799,25 +756,32 @@ class CaptureFitter {
     record.angle_deg = f.angle_deg;
     record.frame = positions_[pos];
 
+    // The ghosts in this frame and their seeds.
     std::vector<int> ids;
     std::vector<GhostParameters> ghosts;
-    frameGhosts(pos, forward, ids, ghosts);
-    std::unique_ptr<Speculation> ahead = std::move(speculation_);
-    SolveStats stats;
-    if (ahead && ahead->pos == pos && ahead->ids == ids && ahead->ghosts.size() == ghosts.size() &&
-        std::equal(ghosts.begin(), ghosts.end(), ahead->ghosts.begin(), sameBits) && !ahead->failed) {
-      ghosts = std::move(ahead->fitted);
-      stats = ahead->stats;
-      ++speculation_hits_;
-    } else {
-      if (ahead && ahead->pos == pos) ++speculation_misses_;
-      if (!ahead || ahead->pos != pos) ahead = std::make_unique<Speculation>(pos, dataFor(pos));
-      stats = solveFrame(*ahead->data, ghosts);
+    for (auto& t : tracks_) {
+      if (forward) {
+        if (t.ended_high || t.fits.empty()) continue;
+        if (t.fits.rbegin()->first >= pos) continue;
+        ghosts.push_back(seedFor(t, pos));
+      } else {
+        auto it = t.fits.find(pos);
+        if (it != t.fits.end()) {
+          ghosts.push_back(it->second);
+        } else {
+          if (t.ended_low || t.fits.empty() || t.fits.begin()->first < pos) continue;
+          ghosts.push_back(seedFor(t, pos));
+        }
+      }
+      ids.push_back(t.id);
     }
-    const FramePyramid& data = *ahead->data;
+    // Backward, a frame no track is extended onto is refitted all the same: its forward fit came,
+    // near a key frame, from a rough detection seed (skipping these refits cost the 12-frame CLI
+    // hold-out test 62 → 16 dB).
+    const FramePyramid data(withoutLight(pos), f.valid, edge_, noiseOf(pos));
     const double noise_sigma = data.full().noise_sigma;
     record.noise_sigma = noise_sigma;
-    group_resolves_ += stats.resolves;
+    SolveStats stats = solveFrame(data, ghosts);
 
     // Ends and records.
     std::vector<int> kept_ids;
@@ -870,26 +834,7 @@ class CaptureFitter {
     // Detection of new ghosts (forward sweep only).
     if (forward && pos % options_.tracking.detect_every == 0) {
       auto t_det = Clock::now();
-      // Meanwhile the next frame is solved with the ghosts known now, on the other core: it is
-      // what the next frame will solve unless detection finds a ghost (then it is solved again).
-      // Detection and the frame's solve are each mostly one thread (their Ceres solves), so this
-      // overlaps them.
-      tbb::task_group ahead_group;
-      if (pos + 1 < static_cast<int>(positions_.size())) {
-        speculation_ = std::make_unique<Speculation>(pos + 1, dataFor(pos + 1));
-        frameGhosts(pos + 1, true, speculation_->ids, speculation_->ghosts);
-        Speculation* next = speculation_.get();
-        ahead_group.run([this, next] {
-          try {
-            next->fitted = next->ghosts;
-            next->stats = solveFrame(*next->data, next->fitted);
-          } catch (...) {
-            next->failed = true;  // the next frame solves in turn (and throws there if it must)
-          }
-        });
-      }
-      tbb::this_task_arena::isolate([&] { detectNew(pos, data, kept_ids, kept, stats); });
-      ahead_group.wait();
+      detectNew(pos, data, kept_ids, kept, stats);
       seconds_detecting_ += since(t_det);
     }
     record.ghost_ids = kept_ids;
@@ -943,51 +888,7 @@ class CaptureFitter {
     record.light_zone_px = light_full.zone_radius_px;
     const LightImage light = light_full.atLevel(kd);
     auto candidates = detectGhosts(residual, level.valid, level.noise_sigma, light, options_.detection);
-    // Each candidate's fit, against the ghosts known before any candidate was kept: computed for
-    // all candidates concurrently (each fit is mostly Ceres on one thread), then taken in order. A
-    // candidate is fitted again when a ghost kept before it reaches its cost (GroupCost::reaches),
-    // so every fit is the one the one-by-one order gives, bit for bit. Candidates that duplicate a
-    // known ghost are rejected in any case and not fitted.
-    struct CandidateFit {
-      GhostParameters seed;
-      std::unique_ptr<GroupCost> cost;
-      double cost_without = 0;
-      GroupFitResult r;
-      double before = 0, after = 0;
-      bool done = false;
-    };
-    auto fitCandidate = [&](const Detection& c, const std::vector<GhostParameters>& known, CandidateFit& f) {
-      std::vector<GhostParameters> one = {f.seed};
-      f.cost = std::make_unique<GroupCost>(data, edge_, known, one, options_.cost);
-      GhostParameters dark = f.seed;
-      dark.border = {0, 0, 0};
-      dark.inside = {0, 0, 0};
-      std::vector<GhostParameters> none = {dark};
-      f.cost_without = f.cost->evaluate(none, false);
-      f.r = solveGroup(*f.cost, one, solver_);
-      const GhostParameters& g = f.r.ghosts[0];
-      // Does the ghost explain its blob? The median absolute residual over the blob's pixels
-      // before and after (the region's cost, or a mean, would be ruled by the light's starburst
-      // and neighbours that cross the blob).
-      std::vector<double> b, a;
-      model::ViewTransform view;
-      view.scale = 1.0 / kd;
-      std::vector<GhostParameters> fitted = {g};
-      cv::Mat rendered = luminance(model::renderGhosts(fitted, c.blob, stack_.channels, {}, view));
-      for (int y = 0; y < c.blob.height; ++y)
-        for (int x = 0; x < c.blob.width; ++x) {
-          if (!c.mask.at<uchar>(y, x)) continue;
-          const double v = residual.at<float>(c.blob.y + y, c.blob.x + x);
-          b.push_back(std::abs(v));
-          a.push_back(std::abs(v - rendered.at<float>(y, x)));
-        }
-      f.before = medianOf(b);
-      f.after = medianOf(a);
-      f.done = true;
-    };
-    std::vector<CandidateFit> fits(candidates.size());
-    for (size_t i = 0; i < candidates.size(); ++i) {
-      const auto& c = candidates[i];
+    for (const auto& c : candidates) {
       GhostParameters grey = c.seed;
       grey.center_x *= kd;
       grey.center_y *= kd;
@@ -997,39 +898,48 @@ class CaptureFitter {
       grey.inside_falloff *= kd;
       grey.outside_falloff *= kd;
       const cv::Rect blob(c.blob.x * kd, c.blob.y * kd, c.blob.width * kd, c.blob.height * kd);
-      fits[i].seed = toChannels(grey, data.full().image, blob);
-    }
-    const std::vector<GhostParameters> known = ghosts;
-    auto duplicates = [&](const GhostParameters& seed, const std::vector<GhostParameters>& list) {
-      return std::any_of(list.begin(), list.end(), [&](const GhostParameters& g) { return sameGhost(seed, g); });
-    };
-    tbb::parallel_for(size_t{0}, candidates.size(), [&](size_t i) {
-      if (duplicates(fits[i].seed, known)) return;
-      try {
-        fitCandidate(candidates[i], known, fits[i]);
-      } catch (...) {
-        fits[i].done = false;  // fitted again in turn (and throws there if it must)
-      }
-    });
-    for (size_t i = 0; i < candidates.size(); ++i) {
-      const auto& c = candidates[i];
-      CandidateFit& f = fits[i];
-      const GhostParameters& seed = f.seed;
-      const cv::Rect blob(c.blob.x * kd, c.blob.y * kd, c.blob.width * kd, c.blob.height * kd);
-      if (duplicates(seed, ghosts)) {
+      GhostParameters seed = toChannels(grey, data.full().image, blob);
+      bool duplicate = false;
+      for (const auto& g : ghosts)
+        if (sameGhost(seed, g)) duplicate = true;
+      if (duplicate) {
         ++rejected_;
         continue;
       }
-      bool same_known = f.done;
-      for (size_t k = known.size(); k < ghosts.size() && same_known; ++k)
-        same_known = !f.cost->reaches(ghosts[k]);
-      if (!same_known) fitCandidate(c, ghosts, f);
-      const double cost_without = f.cost_without;
-      const GroupFitResult& r = f.r;
+      std::vector<GhostParameters> one = {seed};
+      GroupCost cost(data, edge_, ghosts, one, options_.cost);
+      GhostParameters dark = seed;
+      dark.border = {0, 0, 0};
+      dark.inside = {0, 0, 0};
+      std::vector<GhostParameters> none = {dark};
+      const double cost_without = cost.evaluate(none, false);
+      GroupFitResult r = solveGroup(cost, one, solver_);
       stats.evaluations += r.evaluations;
       stats.iterations += r.iterations;
       const GhostParameters& g = r.ghosts[0];
-      const double before = f.before, after = f.after;
+      // Does the ghost explain its blob? The median absolute residual over the blob's pixels
+      // before and after (the region's cost, or a mean, would be ruled by the light's starburst
+      // and neighbours that cross the blob).
+      double before = 0, after = 0;
+      {
+        std::vector<double> b, a;
+        model::ViewTransform view;
+        view.scale = 1.0 / kd;
+        std::vector<GhostParameters> fitted = {g};
+        cv::Mat rendered = luminance(model::renderGhosts(fitted, c.blob, stack_.channels, {}, view));
+        for (int y = 0; y < c.blob.height; ++y)
+          for (int x = 0; x < c.blob.width; ++x) {
+            if (!c.mask.at<uchar>(y, x)) continue;
+            const double v = residual.at<float>(c.blob.y + y, c.blob.x + x);
+            b.push_back(std::abs(v));
+            a.push_back(std::abs(v - rendered.at<float>(y, x)));
+          }
+        before = medianOf(b);
+        after = medianOf(a);
+      }
+      // Ghosts are mirror-symmetric about the axis through the light's image and the image centre
+      // (Walch et al. 2018 §3.2): a fit whose centre left the axis drew a starburst line or a
+      // piece of the halo, not a ghost.
       const bool on_axis = axisOffset(pos, {g.center_x, g.center_y}) <=
                            options_.detection.max_axis_offset * stack_.size.height;
       const bool explains = on_axis && after <= (1 - options_.tracking.min_cost_reduction) * before;
@@ -1215,8 +1125,6 @@ class CaptureFitter {
   int next_id_ = 0;
   int detections_ = 0, rejected_ = 0;
   int group_resolves_ = 0;  // groups solved again because the groups before them moved onto them
-  std::unique_ptr<Speculation> speculation_;  // the next frame, solved during this one's detection
-  int speculation_hits_ = 0, speculation_misses_ = 0;
   long long evaluations_ = 0, iterations_ = 0;
   double seconds_fitting_ = 0, seconds_detecting_ = 0;
 };
