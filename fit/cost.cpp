@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
 
 namespace flarekit::fit {
 
@@ -94,6 +95,7 @@ FramePyramid::FramePyramid(const cv::Mat& image, const cv::Mat& valid, const Edg
 
 const FrameData& FramePyramid::level(int factor) const {
   factor = std::max(1, factor);
+  const std::lock_guard<std::mutex> lock(mutex_);
   auto it = levels_.find(factor);
   if (it != levels_.end()) return it->second;
   if (factor == 1) {
@@ -225,21 +227,39 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
   }
 }
 
-double GroupCost::evaluate(const std::vector<const double*>& parameters, bool jacobians) {
+namespace {
+
+std::vector<model::GhostParameters> ghostsFrom(const std::vector<const double*>& parameters, int count,
+                                               int channels) {
   std::vector<model::GhostParameters> ghosts;
   ghosts.reserve(parameters.size());
   for (const double* p : parameters)
-    ghosts.push_back(model::fromParameterVector(std::span<const double>(p, parameters_per_ghost_), channels_));
-  return evaluate(ghosts, jacobians);
+    ghosts.push_back(model::fromParameterVector(std::span<const double>(p, count), channels));
+  return ghosts;
+}
+
+}  // namespace
+
+double GroupCost::evaluate(const std::vector<const double*>& parameters, bool jacobians) {
+  return evaluate(ghostsFrom(parameters, parameters_per_ghost_, channels_), jacobians);
+}
+
+void GroupCost::prepare(const std::vector<const double*>& parameters, bool jacobians) {
+  evaluateImages(ghostsFrom(parameters, parameters_per_ghost_, channels_), jacobians);
 }
 
 double GroupCost::evaluate(std::span<const model::GhostParameters> input, bool jacobians) {
+  evaluateImages(input, jacobians);
+  return region_.empty() ? 0.0 : totalCost();
+}
+
+void GroupCost::evaluateImages(std::span<const model::GhostParameters> input, bool jacobians) {
   ++evaluations_;
   if (static_cast<int>(input.size()) != ghost_count_)
     throw std::invalid_argument("GroupCost::evaluate: wrong number of ghosts");
   if (region_.empty()) {
     has_jacobians_ = jacobians;
-    return 0;
+    return;
   }
   prior_cost_ = 0;
   if (priorResidualCount() > 0) {
@@ -281,26 +301,32 @@ double GroupCost::evaluate(std::span<const model::GhostParameters> input, bool j
       const auto& d = rendered.derivatives[g];
       if (d.rect.empty()) continue;
       // Data part: the derivative image where it meets the region.
-      const cv::Rect data_rect = d.rect & region_;
+      jacobian_rect_[g][0] = (d.rect & region_) - region_.tl();
       // Edge part: E spreads the derivative by the filter radius.
       const cv::Rect spread(d.rect.x - r, d.rect.y - r, d.rect.width + 2 * r, d.rect.height + 2 * r);
-      const cv::Rect edge_rect = spread & region_;
-      jacobian_rect_[g][0] = data_rect - region_.tl();
-      jacobian_rect_[g][1] = edge_rect - region_.tl();
-      for (int k = 0; k < parameters_per_ghost_; ++k) {
-        const cv::Mat& image = d.images[k];
-        if (!data_rect.empty()) {
-          cv::Mat crop = image(data_rect - d.rect.tl());
-          crop.convertTo(jacobian_data_[g][k], CV_32F, inv_scale);
-        }
-        if (!edge_rect.empty()) {
-          cv::Mat padded = cv::Mat::zeros(spread.size(), image.type());
-          image.copyTo(padded(cv::Rect(r, r, d.rect.width, d.rect.height)));
-          cv::Mat e = edge_.apply(padded);
-          e(edge_rect - spread.tl()).convertTo(jacobian_edge_[g][k], CV_32F, edge_factor);
-        }
-      }
+      jacobian_rect_[g][1] = (spread & region_) - region_.tl();
     }
+    // Each parameter's images on their own task (the edge filter of every derivative image ran on
+    // one thread, beside Ceres's); each task writes its own images, so the result is the same.
+    tbb::parallel_for(0, ghost_count_ * parameters_per_ghost_, [&](int index) {
+      const int g = index / parameters_per_ghost_, k = index % parameters_per_ghost_;
+      const auto& d = rendered.derivatives[g];
+      if (d.rect.empty()) return;
+      const cv::Rect data_rect = jacobian_rect_[g][0] + region_.tl();
+      const cv::Rect edge_rect = jacobian_rect_[g][1] + region_.tl();
+      const cv::Rect spread(d.rect.x - r, d.rect.y - r, d.rect.width + 2 * r, d.rect.height + 2 * r);
+      const cv::Mat& image = d.images[k];
+      if (!data_rect.empty()) {
+        cv::Mat crop = image(data_rect - d.rect.tl());
+        crop.convertTo(jacobian_data_[g][k], CV_32F, inv_scale);
+      }
+      if (!edge_rect.empty()) {
+        cv::Mat padded = cv::Mat::zeros(spread.size(), image.type());
+        image.copyTo(padded(cv::Rect(r, r, d.rect.width, d.rect.height)));
+        cv::Mat e = edge_.apply(padded);
+        e(edge_rect - spread.tl()).convertTo(jacobian_edge_[g][k], CV_32F, edge_factor);
+      }
+    });
     // Raw planes for sampleJacobian, which Ceres calls once per pixel and ghost.
     auto planes = [&](const std::vector<std::vector<cv::Mat>>& images) {
       std::vector<std::vector<JacobianPlane>> out(ghost_count_, std::vector<JacobianPlane>(parameters_per_ghost_));
@@ -312,7 +338,11 @@ double GroupCost::evaluate(std::span<const model::GhostParameters> input, bool j
     jacobian_data_planes_ = planes(jacobian_data_);
     jacobian_edge_planes_ = planes(jacobian_edge_);
   }
-  return totalCost();
+}
+
+bool GroupCost::reaches(const model::GhostParameters& ghost) const {
+  // The test renderGhosts applies to each ghost it is given (model_renderer.cpp renderInto).
+  return !region_.empty() && (model::ghostPixelBounds(ghost, view_) & grown_).area() > 0;
 }
 
 void GroupCost::sampleResiduals(int sample, double* residuals) const {

@@ -76,7 +76,7 @@ class RenderCallback : public ceres::EvaluationCallback {
     if (!new_evaluation_point && (!evaluate_jacobians || cost_.hasJacobians()) && evaluated_) return;
     std::vector<const double*> p;
     for (const auto& b : blocks_) p.push_back(b.data());
-    cost_.evaluate(p, evaluate_jacobians);
+    cost_.prepare(p, evaluate_jacobians);
     evaluated_ = true;
   }
 
@@ -283,7 +283,7 @@ class WholeGroupCost : public ceres::CostFunction {
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
     std::vector<const double*> p(parameters, parameters + cost_.ghostCount());
-    cost_.evaluate(p, jacobians != nullptr);
+    cost_.prepare(p, jacobians != nullptr);
     const int m = cost_.residualsPerSample(), n = cost_.parametersPerGhost();
     std::vector<double> row(static_cast<size_t>(m) * n);
     for (size_t i = 0; i < cost_.samples().size(); ++i) {
