@@ -231,6 +231,16 @@ FrameStack testStack() {
   return stack;
 }
 
+// Frame `index` of `stack` at `angle_deg`: the one ghost `g` rendered, every pixel valid.
+Frame oneGhostFrame(const FrameStack& stack, int index, double angle_deg, const model::GhostParameters& g) {
+  Frame f;
+  f.index = index;
+  f.angle_deg = angle_deg;
+  f.image = model::renderGhosts(std::vector<model::GhostParameters>{g}, stack.size, 1);
+  f.valid = cv::Mat(stack.size, CV_8U, cv::Scalar(255));
+  return f;
+}
+
 TEST(FitCapture, RecoversMovingGhostsInMemory) {
   FrameStack stack = testStack();
   cv::theRNG().state = 5;
@@ -243,15 +253,10 @@ TEST(FitCapture, RecoversMovingGhostsInMemory) {
     g.height = 14;
     g.border = {1, 0, 0};
     g.inside = {0.4, 0, 0};
-    std::vector<model::GhostParameters> one = {g};
-    Frame f;
-    f.index = i;
-    f.angle_deg = theta;
-    f.image = model::renderGhosts(one, stack.size, 1);
+    Frame f = oneGhostFrame(stack, i, theta, g);
     cv::Mat noise(stack.size, CV_32F);
     cv::randn(noise, 0, 0.01);
     f.image += noise;
-    f.valid = cv::Mat(stack.size, CV_8U, cv::Scalar(255));
     stack.frames.push_back(f);
   }
   FitOptions options;
@@ -286,12 +291,7 @@ TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
     g.height = 13;
     g.border = {0.8, 0, 0};
     g.inside = {0.3, 0, 0};
-    std::vector<model::GhostParameters> one = {g};
-    Frame f;
-    f.index = i;
-    f.angle_deg = theta;
-    f.image = model::renderGhosts(one, stack.size, 1);
-    f.valid = cv::Mat(stack.size, CV_8U, cv::Scalar(255));
+    Frame f = oneGhostFrame(stack, i, theta, g);
     for (int y = 0; y < stack.size.height; ++y)
       for (int x = 0; x < stack.size.width; ++x) {
         const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
