@@ -72,7 +72,10 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
                               {"ceres_final_cost", c.final_cost},
                               {"ceres_seconds_total", c.seconds},
                               {"ceres_evaluations_total", c.evaluations},
-                              {"ceres_iterations", c.iterations}};
+                              {"ceres_iterations", c.iterations},
+                              {"ceres_termination", c.termination},
+                              {"gd_final_parameters", model::toParameterVector(g.ghosts[0])},
+                              {"ceres_final_parameters", model::toParameterVector(c.ghosts[0])}};
       ++total;
       bool ok = false;
       for (const auto& t : c.trace)

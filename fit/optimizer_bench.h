@@ -3,7 +3,9 @@
 // (Walch et al. 2018 §3.3.2) on the same frames from the same starting points (the seeds
 // detection finds), on the same cost. Per case: the GD's final cost, its time and cost
 // evaluations to reach it, and Ceres's time and evaluations to reach that cost (or its final
-// cost if it never does).
+// cost if it never does); why Ceres stopped, and where each optimizer ended (its final
+// parameters), so that a case Ceres does not win can be looked into (a local minimum of its own,
+// a bound).
 
 #include <nlohmann/json.hpp>
 

@@ -144,6 +144,31 @@ TEST(CliFit, HeldOutFramesThroughThePolynomials) {
   EXPECT_GE(j["median_psnr_db"].get<double>(), 30) << eval.out;
 }
 
+// `bench fit` starts both optimizers from the same seed on the same cost and says where each
+// ended. On two well-separated ghosts in light noise both lower the cost, and Ceres reaches the
+// gradient descent's final cost.
+TEST(CliFit, BenchStartsBothOptimizersFromOneSeedAndReportsWhereTheyEnd) {
+  TempDir dir;
+  writeCapture(dir / "capture", 6);
+  auto r = runFlarekit({"-q", "bench", "fit", (dir / "capture").string(), "--frames", "2",
+                        "--gd-iterations", "60", "--json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  ASSERT_EQ(j["cases"].size(), 2u) << r.out;
+  EXPECT_EQ(j["cases_total"].get<int>(), 2);
+  for (const auto& c : j["cases"]) {
+    const double initial = c["initial_cost"];
+    EXPECT_LT(c["gd_final_cost"].get<double>(), initial) << c.dump();
+    EXPECT_LT(c["ceres_final_cost"].get<double>(), initial) << c.dump();
+    EXPECT_FALSE(c["ceres_termination"].get<std::string>().empty());
+    const size_t parameters = c["seed"].size();
+    EXPECT_EQ(c["gd_final_parameters"].size(), parameters);
+    EXPECT_EQ(c["ceres_final_parameters"].size(), parameters);
+    EXPECT_NE(c["ceres_final_parameters"], c["seed"]);
+    EXPECT_TRUE(c["ceres_reached_gd_cost"].get<bool>()) << c.dump();
+  }
+}
+
 TEST(CliFit, BadInputGivesOneLineAndExitTwo) {
   TempDir dir;
   writeCapture(dir / "capture", 4);
