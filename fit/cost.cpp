@@ -74,6 +74,26 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
   return 1.4826 * values[values.size() / 2];
 }
 
+double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
+  std::vector<float> differences;
+  const int c = image.channels();
+  const int row_step = std::max(1, static_cast<int>(image.total() / 40000 / std::max(1, image.cols)));
+  for (int y = 0; y < image.rows; y += row_step) {
+    const float* p = image.ptr<float>(y);
+    const uchar* v = valid.ptr<uchar>(y);
+    for (int x = 0; x + 1 < image.cols; ++x) {
+      if (!v[x] || !v[x + 1]) continue;
+      double difference = 0;
+      for (int k = 0; k < c; ++k) difference += p[(x + 1) * c + k] - p[x * c + k];
+      differences.push_back(static_cast<float>(std::abs(difference / c)));
+    }
+  }
+  if (differences.size() < 16) return 0;
+  std::nth_element(differences.begin(), differences.begin() + differences.size() / 2, differences.end());
+  // A difference of two independent values of σ has σ√2.
+  return 1.4826 / std::sqrt(2.0) * differences[differences.size() / 2];
+}
+
 FrameData FrameData::make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge,
                           int factor) {
   FrameData d;

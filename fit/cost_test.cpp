@@ -68,6 +68,25 @@ TEST(EdgeFilter, IgnoresConstantsAndRespondsToEdges) {
   EXPECT_NEAR(response.at<float>(20, 5), 0, 1e-4);
 }
 
+// A frame like the Heliar's beyond 10°: veils larger than the frame, each a plateau 20–50 σ
+// above the next, cover most of it. Their steps are no noise.
+TEST(EstimatePixelNoiseSigma, FrameFillingVeilsDoNotInflateIt) {
+  const cv::Size size(240, 160);
+  const double sigma = 1e-3;
+  const std::vector<GhostParameters> veils = {ghost(40, 80, 150, 150, 150, 0.05, 0.05),
+                                              ghost(-20, 80, 200, 200, 200, 0.03, 0.03),
+                                              ghost(100, 80, 60, 60, 60, 0.02, 0.02)};
+  const cv::Mat clean = model::renderGhosts(veils, size, 1);
+  const cv::Mat frame = addNoise(clean, sigma, 5);
+  cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  EXPECT_NEAR(estimatePixelNoiseSigma(frame, valid), sigma, 0.1 * sigma);
+  // Only the valid pixels count: saturated ones (here a tenth of the frame, flat) are left out.
+  cv::Mat flat = frame.clone();
+  flat(cv::Rect(0, 0, 24, 160)).setTo(1.0);
+  valid(cv::Rect(0, 0, 24, 160)).setTo(0);
+  EXPECT_NEAR(estimatePixelNoiseSigma(flat, valid), sigma, 0.1 * sigma);
+}
+
 TEST(GroupCost, AnalyticJacobianMatchesGradientChecker) {
   const cv::Size size(96, 72);
   const std::vector<GhostParameters> truth = {ghost(44, 36, 18, 22, 15, 1.0, 0.4),

@@ -142,7 +142,7 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
       truth_flare = cv::Mat::zeros(stack.size, CV_32F);
       for (const auto& g : truth) truth_flare += luminance(g.image);
     } else {
-      fe.noise_sigma = estimateNoiseSigma(f.image, f.valid);
+      fe.noise_sigma = estimatePixelNoiseSigma(f.image, f.valid);
     }
     // PSNR against the frame over the model's footprint.
     {

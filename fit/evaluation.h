@@ -15,8 +15,9 @@
 //  - Without truth: PSNR of the model against the frame over the pixels where the model exceeds
 //    the noise σ.
 // The noise floor σ is 1.4826 × the median absolute deviation of frame − noise-free radiance over
-// valid pixels (truth known: the background's noise, not the light's shot noise), else the robust
-// estimate of fit/cost.h.
+// valid pixels (truth known: the background's noise, not the light's shot noise), else the pixel
+// noise from neighbour differences (fit/cost.h estimatePixelNoiseSigma: frame-filling veils do
+// not inflate it).
 
 #include <optional>
 #include <string>
