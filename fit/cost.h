@@ -135,13 +135,14 @@ class FramePyramid {
 // test frames (0.0061 for 0.01), 2.7× the background's on lit Heliar frames, 5–10× once the light
 // has left the frame (14–16°: frame-filling veils make the spread); an estimate from differences
 // of horizontal neighbours was within 30 % on all three (estimatePixelNoiseSigma). The fitter
-// keeps this one: switched to the pixel noise, its detection levels (in σ) find the sum of the
-// faint veils as one frame-filling blob, and on the 640×427 0–30° captures the median PSNR went
-// 22.2 → 25.2 dB on the Heliar but 22.9 → 19.3 dB on the Tessar, whose precision fell 80 → 68 %.
+// keeps this one for now: switched to the pixel noise, its detection levels (in σ) find the sum
+// of the faint veils as one frame-filling blob, and on the 640×427 0–30° captures the median PSNR
+// went 22.2 → 25.2 dB on the Heliar (inside the 22.2–25.1 dB that λ ± 1 % alone gives) but
+// 22.9 → 19.3 dB on the Tessar, whose precision fell 80 → 68 %.
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The noise σ of the pixels: 1.4826 / √2 × the median absolute difference of horizontal
-// neighbours (luminance), over a subsample of rows. Ghosts, veils and the light's fall-off change
+// neighbours (mean over channels), over a subsample of rows. Ghosts, veils and the light's fall-off change
 // little from one pixel to the next, and their edges are too few to move the median, so a frame
 // full of veils does not inflate it: on the Heliar 640×427 capture, 0–28°, it was within 10 % of
 // the σ of frame − noise-free radiance, where estimateNoiseSigma was 2–9.5× that.
