@@ -204,7 +204,7 @@ long long traceGhostTriangles(const RenderSetup& setup, const Ghost& ghost, int 
   RayGrid grid = *box;
   grid.n = n;
   TracedRays rays;
-  traceGrid(path, setup.direction, grid, &rays);
+  traceGridCorners(path, setup.direction, grid, &rays);
   const double cell = grid.spacing_mm();
   const double cell_flux = cell * cell * std::abs(setup.direction[2]) * setup.light_irradiance;
   long long traced = 33LL * 33 + static_cast<long long>(n) * n;

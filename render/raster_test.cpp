@@ -1,7 +1,9 @@
 #include "render/raster.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -79,6 +81,57 @@ TEST(Raster, TiledEqualsPerGhost) {
       std::printf("[ tiled vs per-ghost ] %s at %.0f deg: PSNR %.1f dB\n", name, angle, p);
       EXPECT_GE(p, 60.0) << name << " " << angle;
     }
+  }
+}
+
+// Whether two triangles are the same field by field, bit for bit (padding aside).
+bool sameTriangle(const RasterTriangle& a, const RasterTriangle& b) {
+  auto same = [](const auto& x, const auto& y) { return std::memcmp(&x, &y, sizeof(x)) == 0; };
+  return same(a.ox, b.ox) && same(a.oy, b.oy) && same(a.ea, b.ea) && same(a.eb, b.eb) &&
+         same(a.ec, b.ec) && same(a.top_left, b.top_left) && same(a.u0, b.u0) && same(a.ux, b.ux) &&
+         same(a.uy, b.uy) && same(a.v0, b.v0) && same(a.vx, b.vx) && same(a.vy, b.vy) &&
+         same(a.r0, b.r0) && same(a.rx, b.rx) && same(a.ry, b.ry) && same(a.t0, b.t0) &&
+         same(a.tx, b.tx) && same(a.ty, b.ty) && same(a.aperture_footprint, b.aperture_footprint) &&
+         same(a.rim_footprint, b.rim_footprint) && same(a.weight, b.weight) &&
+         same(a.interior, b.interior) && same(a.splat, b.splat) && same(a.px, b.px) &&
+         same(a.py, b.py) && same(a.area_px, b.area_px) && same(a.x0, b.x0) && same(a.y0, b.y0) &&
+         same(a.x1, b.x1) && same(a.y1, b.y1) && same(a.batch, b.batch);
+}
+
+// A ghost's grid traced by traceGridCorners (rays that cannot pass and have no passing neighbour
+// reported dead) gives buildTriangles the same triangles, bit for bit, and the same quads to
+// refine as traceGrid.
+TEST(Raster, CornerGridMakesTheSameTriangles) {
+  for (const char* name : {"heliar_tronnier.json", "nikon_zoom_28_75mm_at_28mm.json"}) {
+    FlareRenderOptions o;
+    o.width_px = 640;
+    o.height_px = 360;
+    const RenderSetup setup = prepareRender(lensNamed(name), {12.0, 30.0}, o);
+    const std::vector<Ghost> ghosts = enumerateGhosts(setup.lens);
+    int compared = 0, fewer = 0;
+    for (size_t g = 0; g < ghosts.size(); g += 7) {
+      const auto path = compilePath(setup.lens, ghostPath(setup.lens, ghosts[g].surface_a, ghosts[g].surface_b),
+                                    setup.samples[1].wavelength_nm, setup.tables[1]);
+      auto box = boundGhost(setup, path);
+      if (!box) continue;
+      box->n = 48;
+      TracedRays full, corners;
+      traceGrid(path, setup.direction, *box, &full);
+      traceGridCorners(path, setup.direction, *box, &corners);
+      std::vector<RasterTriangle> a, b;
+      std::vector<int> refine_a, refine_b;
+      buildTriangles(full, setup.mapping, setup.aperture, 1.0, {1.0f, 1.0f, 1.0f}, 0, &a, &refine_a);
+      buildTriangles(corners, setup.mapping, setup.aperture, 1.0, {1.0f, 1.0f, 1.0f}, 0, &b, &refine_b);
+      ASSERT_EQ(a.size(), b.size()) << name << " ghost " << g;
+      for (size_t k = 0; k < a.size(); ++k)
+        ASSERT_TRUE(sameTriangle(a[k], b[k])) << name << " ghost " << g << " triangle " << k;
+      EXPECT_EQ(refine_a, refine_b) << name << " ghost " << g;
+      ++compared;
+      fewer += std::count(corners.alive.begin(), corners.alive.end(), 0) >
+               std::count(full.alive.begin(), full.alive.end(), 0);
+    }
+    EXPECT_GT(compared, 0) << name;
+    EXPECT_GT(fewer, 0) << name << ": no grid had rays left out";
   }
 }
 

@@ -94,6 +94,13 @@ void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0,
 // same result as without.
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
                TracedRays* out, bool passing_only = false);
+// Traces a grid for buildTriangles (render/raster.h): as traceGrid, but a ray that cannot pass
+// (as with `passing_only`) and has no passing ray among its eight neighbours may be reported dead.
+// No grid quad that shows part of the ghost has such a ray as a corner, and the quads next to
+// those that do are told apart from them by their passing corners alone, so buildTriangles makes
+// the same triangles and refines the same quads as from traceGrid.
+void traceGridCorners(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,
+                      TracedRays* out);
 // Traces grids of one size (grids[g].n = n for all g) one after another, in full blocks:
 // grid g's rays from index g·n² on (out->n = n). Each ray gets the same result as from traceGrid.
 void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vector<RayGrid>& grids,
