@@ -107,8 +107,9 @@ void traceGrids(const CompiledPath& path, const cv::Vec3d& dir, const std::vecto
                 TracedRays* out);
 
 // The point in the z = 0 plane from which a ray of direction `dir` passes the centre of the stop
-// on `path` (found by Newton iteration on the real trace, started from the paraxial guess).
-// Returns false when no such ray exists.
+// on `path` (found by Newton iteration on the real trace, started from the paraxial guess; each
+// step halved until it lands on a ray that reaches the sensor). Returns false when the search
+// finds no such ray: it is local, and may miss a ray that exists far from the guess.
 bool findStopCenterRay(const CompiledPath& path, const cv::Vec3d& dir, double guess_x,
                        double guess_y, cv::Point2d* origin);
 // The same for the ray through aperture coordinates (target_u, target_v) (stop semi-aperture = 1).
