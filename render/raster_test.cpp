@@ -146,13 +146,10 @@ bool folds(const RenderSetup& setup, const Ghost& g) {
   TracedRays r;
   traceGrid(path, setup.direction, *box, &r);
   int positive = 0, negative = 0;
-  auto inside = [&](size_t k) {
-    return r.alive[k] && r.r_rel[k] <= 1 && r.u[k] * r.u[k] + r.v[k] * r.v[k] <= 1;
-  };
   for (int j = 0; j + 1 < 128; ++j)
     for (int i = 0; i + 1 < 128; ++i) {
       const size_t k = static_cast<size_t>(j * 128 + i);
-      if (!inside(k) || !inside(k + 1) || !inside(k + 128) || !inside(k + 129)) continue;
+      if (!r.passes(k) || !r.passes(k + 1) || !r.passes(k + 128) || !r.passes(k + 129)) continue;
       const double ax = r.x_mm[k + 1] - r.x_mm[k], ay = r.y_mm[k + 1] - r.y_mm[k];
       const double bx = r.x_mm[k + 128] - r.x_mm[k], by = r.y_mm[k + 128] - r.y_mm[k];
       (ax * by - ay * bx > 0 ? positive : negative)++;

@@ -524,10 +524,7 @@ void traceGridCorners(const CompiledPath& path, const cv::Vec3d& dir, const RayG
   traceGridList(path, dir, &grid, 1, out, Drop::kAfterStop, &dropped);
   if (dropped.empty()) return;
   const int n = grid.n;
-  auto passes = [&](int i, int j) {
-    const auto k = static_cast<size_t>(j * n + i);
-    return out->alive[k] && out->r_rel[k] <= 1.0f && out->u[k] * out->u[k] + out->v[k] * out->v[k] <= 1.0f;
-  };
+  auto passes = [&](int i, int j) { return out->passes(static_cast<size_t>(j * n + i)); };
   // A dropped ray cannot pass, so its neighbours' verdicts are final.
   std::vector<int> again;
   for (const int k : dropped) {

@@ -83,13 +83,17 @@ struct TracedRays {
   // u = v = 0 and r_rel = 1e6.
   std::vector<uint8_t> alive;
   void resize(int count);
+  // Whether ray k passes every rim and the stop circle (r_rel ≤ 1, u² + v² ≤ 1, as floats).
+  bool passes(size_t k) const {
+    return alive[k] && r_rel[k] <= 1.0f && u[k] * u[k] + v[k] * v[k] <= 1.0f;
+  }
 };
 
 // Traces `count` rays of direction `dir` from (x0[k], y0[k], 0).
 void traceRays(const CompiledPath& path, const cv::Vec3d& dir, const double* x0, const double* y0,
                int count, TracedRays* out, int offset = 0);
 // Traces a grid (out->n = grid.n). With `passing_only`, for callers that want only the rays that
-// pass every rim and the stop circle (r_rel ≤ 1, u² + v² ≤ 1, as floats): the others may be cut
+// pass (TracedRays::passes): the others may be cut
 // short and reported dead (no work for rays certain to be blocked); those that may pass get the
 // same result as without.
 void traceGrid(const CompiledPath& path, const cv::Vec3d& dir, const RayGrid& grid,

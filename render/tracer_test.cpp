@@ -39,10 +39,6 @@ Traced compiled(const std::string& name, int surface_a, int surface_b) {
   return t;
 }
 
-bool passes(const TracedRays& r, size_t k) {
-  return r.alive[k] && r.r_rel[k] <= 1 && r.u[k] * r.u[k] + r.v[k] * r.v[k] <= 1;
-}
-
 // Ray k of `a` and ray l of `b` report the same, bit for bit.
 bool sameRay(const TracedRays& a, size_t k, const TracedRays& b, size_t l) {
   auto same = [](float x, float y) { return std::memcmp(&x, &y, sizeof x) == 0; };
@@ -83,14 +79,14 @@ TEST(Tracer, RaysBeyondThePupilAreMarkedBlocked) {
   grid.n = 33;
   TracedRays r;
   traceGrid(t.path, lightDirection(0.05, 0.3), grid, &r);
-  EXPECT_TRUE(passes(r, 16 * 33 + 16));
+  EXPECT_TRUE(r.passes(16 * 33 + 16));
   for (size_t k : {size_t{0}, size_t{32}, size_t{32 * 33}, size_t{33 * 33 - 1}})
-    EXPECT_FALSE(passes(r, k)) << "corner " << k;
+    EXPECT_FALSE(r.passes(k)) << "corner " << k;
   int passing = 0;
   for (size_t k = 0; k < r.alive.size(); ++k) {
     EXPECT_LE(r.transmission[k], 1.0f);
     EXPECT_GE(r.transmission[k], 0.0f);
-    passing += passes(r, k);
+    passing += r.passes(k);
   }
   // The passing rays cover about the pupil's disc: π r² / (2·3r / 32)² ≈ 89 rays.
   EXPECT_GT(passing, 60);
@@ -119,8 +115,8 @@ TEST(Tracer, FastGridTracesGiveEachPassingRayThePlainResult) {
       traceGrid(path, setup.direction, grid, &plain);
       traceGrid(path, setup.direction, grid, &fast, /*passing_only=*/true);
       for (size_t k = 0; k < plain.alive.size(); ++k) {
-        if (passes(plain, k)) ASSERT_TRUE(sameRay(plain, k, fast, k)) << name << " ghost " << g << " ray " << k;
-        if (!fast.alive[k]) ASSERT_FALSE(passes(plain, k)) << name << " ghost " << g << " ray " << k;
+        if (plain.passes(k)) ASSERT_TRUE(sameRay(plain, k, fast, k)) << name << " ghost " << g << " ray " << k;
+        if (!fast.alive[k]) ASSERT_FALSE(plain.passes(k)) << name << " ghost " << g << " ray " << k;
       }
       // Three grids traced together: each ray as traced alone.
       std::vector<RayGrid> grids = {grid, grid, grid};
