@@ -1,20 +1,18 @@
 #include "render/flare_renderer.h"
 
 #include <cmath>
-#include <filesystem>
 
 #include <gtest/gtest.h>
 
 #include "common/error.h"
 #include "common/exr.h"
 #include "common/testing.h"
+#include "render/testing.h"
 
 namespace flarekit::render {
 namespace {
 
-Lens lensNamed(const std::string& name) {
-  return loadLens(std::filesystem::path(FLAREKIT_SOURCE_DIR) / "lenses" / name);
-}
+using testing::lensNamed;
 
 FlareRenderOptions small() {
   FlareRenderOptions o;

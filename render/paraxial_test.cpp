@@ -1,19 +1,17 @@
 #include "render/paraxial.h"
 
 #include <cmath>
-#include <filesystem>
 
 #include <gtest/gtest.h>
 
 #include "render/ghost_render.h"
+#include "render/testing.h"
 #include "render/tracer.h"
 
 namespace flarekit::render {
 namespace {
 
-Lens lensNamed(const std::string& name) {
-  return loadLens(std::filesystem::path(FLAREKIT_SOURCE_DIR) / "lenses" / name);
-}
+using testing::lensNamed;
 
 TEST(Paraxial, SystemMatrixIsUnimodularInAir) {
   for (const char* name : {"heliar_tronnier.json", "nikon_zoom_28_75mm_at_28mm.json", "pbrt_fisheye_10mm.json"}) {

@@ -4,19 +4,17 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
 
 #include <gtest/gtest.h>
 
 #include "render/flare_renderer.h"
 #include "render/ghost_render.h"
+#include "render/testing.h"
 
 namespace flarekit::render {
 namespace {
 
-Lens lensNamed(const std::string& name) {
-  return loadLens(std::filesystem::path(FLAREKIT_SOURCE_DIR) / "lenses" / name);
-}
+using testing::lensNamed;
 
 // PSNR against the reference's peak: 10 log10(peak² / MSE).
 double psnr(const cv::Mat& reference, const cv::Mat& test) {

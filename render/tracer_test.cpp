@@ -6,7 +6,6 @@
 
 #include <cmath>
 #include <cstring>
-#include <filesystem>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -16,13 +15,12 @@
 #include "render/flare_renderer.h"
 #include "render/ghost_render.h"
 #include "render/ghosts.h"
+#include "render/testing.h"
 
 namespace flarekit::render {
 namespace {
 
-Lens lensNamed(const std::string& name) {
-  return loadLens(std::filesystem::path(FLAREKIT_SOURCE_DIR) / "lenses" / name);
-}
+using testing::lensNamed;
 
 struct Traced {
   Lens lens;
