@@ -792,10 +792,10 @@ void rasterizeTiled(const std::vector<std::vector<RasterTriangle>>& batches,
       // thread's planes meanwhile.
       thread_local std::vector<float> planes;
       planes.assign(3 * area, 0.0f);
-      const float* r = planes.data();
-      const float* g = r + area;
-      const float* b = g + area;
-      const Planes p{planes.data(), planes.data() + area, planes.data() + 2 * area, stride, fx, fy};
+      float* r = planes.data();
+      float* g = r + area;
+      float* b = g + area;
+      const Planes p{r, g, b, stride, fx, fy};
       auto draw = [&](const RasterTriangle& t) {
         rasterizeInto(t, aperture, std::max(t.x0, fx), std::min(t.x1, fx1), std::max(t.y0, fy),
                       std::min(t.y1, fy1), p);
