@@ -77,8 +77,8 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
 double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
   std::vector<float> differences;
   const int c = image.channels();
-  const int row_step = std::max(1, static_cast<int>(image.total() / 40000 / std::max(1, image.cols)));
-  for (int y = 0; y < image.rows; y += row_step) {
+  differences.reserve(image.total());
+  for (int y = 0; y < image.rows; ++y) {
     const float* p = image.ptr<float>(y);
     const uchar* v = valid.ptr<uchar>(y);
     for (int x = 0; x + 1 < image.cols; ++x) {

@@ -142,7 +142,7 @@ class FramePyramid {
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The noise σ of the pixels: 1.4826 / √2 × the median absolute difference of horizontal
-// neighbours (mean over channels), over a subsample of rows. Ghosts, veils and the light's fall-off change
+// neighbours (mean over channels), over every row. Ghosts, veils and the light's fall-off change
 // little from one pixel to the next, and their edges are too few to move the median, so a frame
 // full of veils does not inflate it: on the Heliar 640×427 capture, 0–28°, it was within 10 % of
 // the σ of frame − noise-free radiance, where estimateNoiseSigma was 2–9.5× that.
