@@ -129,6 +129,13 @@ TEST(CliRender, BenchPrintsOneJsonObject) {
   for (const char* key : {"ghosts", "rays_per_s", "ms_tiled", "ms_per_ghost", "ms_matrix", "threads"})
     EXPECT_TRUE(doc.contains(key)) << key;
   EXPECT_EQ(doc["ghosts"].get<int>(), 28);
+  // The speed-ups are the quotients of the medians printed beside them.
+  EXPECT_DOUBLE_EQ(doc["tiled_speedup_over_per_ghost"].get<double>(),
+                   doc["ms_per_ghost"].get<double>() / doc["ms_tiled"].get<double>());
+  EXPECT_DOUBLE_EQ(doc["tiled_raster_speedup_over_per_ghost"].get<double>(),
+                   doc["ms_per_ghost_raster"].get<double>() / doc["ms_tiled_raster"].get<double>());
+  EXPECT_DOUBLE_EQ(doc["matrix_speedup_over_tiled"].get<double>(),
+                   doc["ms_tiled"].get<double>() / doc["ms_matrix"].get<double>());
 }
 
 }  // namespace
