@@ -68,7 +68,7 @@ void registerFit(CLI::App& app) {
     std::string out, optimizer = "ceres", degree = "2", holdout, report;
     int threads = 2;
     double edge_weight = -1, shape_prior = -1;
-    bool light_symmetry = true;
+    bool light_symmetry = true, veils = false;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -87,6 +87,9 @@ void registerFit(CLI::App& app) {
                   "σ of the prior that holds unseen parts of a ghost's outline at its seed, as a fraction of its size (default 1; 0 = off)");
   cmd->add_flag("--light-symmetry,!--no-light-symmetry", o->light_symmetry,
                 "Separate the light's own image by its point symmetry (default), or keep out of the light's zone");
+  cmd->add_flag("--veils", o->veils,
+                "Also seed veils that fill the frame from steps of the residual along the flare axis "
+                "(off by default: more ghosts found, a less stable physics ranking; fit/detection.h)");
   addStackOptions(cmd, o->stack);
   cmd->callback([o] {
     fit::FitOptions options;
@@ -108,6 +111,7 @@ void registerFit(CLI::App& app) {
     if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
     if (o->shape_prior >= 0) options.cost.prior_fraction = o->shape_prior;
     options.detection.light_symmetry = o->light_symmetry;
+    options.detection.find_veils = o->veils;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
     checkWritable(o->out);  // before minutes of fitting, not after

@@ -27,6 +27,8 @@ bool DetectionOptions::IsValid(std::string* error) const {
   if (!(core_margin >= 1)) return fail("core_margin must be ≥ 1");
   if (!(light_smoothing_px >= 0)) return fail("light_smoothing_px must be ≥ 0");
   if (max_new_per_frame < 1) return fail("max_new_per_frame must be ≥ 1");
+  if (veil_band_px < 0 || veil_window_px < 1) return fail("veil_band_px must be ≥ 0, veil_window_px ≥ 1");
+  if (!(veil_step_sigma > 0)) return fail("veil_step_sigma must be > 0");
   return true;
 }
 
@@ -328,6 +330,114 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
             [](const Detection& a, const Detection& b) { return a.peak > b.peak; });
   if (static_cast<int>(found.size()) > options.max_new_per_frame)
     found.resize(options.max_new_per_frame);
+  return found;
+}
+
+std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& valid,
+                                       double noise_sigma, const LightImage& light,
+                                       const DetectionOptions& options) {
+  std::vector<Detection> found;
+  if (!(noise_sigma > 0)) return found;
+  const int W = residual.cols, H = residual.rows;
+  const cv::Point2d center(W / 2.0, H / 2.0);
+  // The axis as flareAxisOffset draws it: through the image centre towards the light.
+  cv::Point2d dir(1, 0);
+  if (light.found && cv::norm(light.center - center) > 0.05 * W) {
+    dir = light.center - center;
+    dir /= cv::norm(dir);
+  }
+  const cv::Point2d across(-dir.y, dir.x);
+  const double keep_out = light.found ? light.core_radius_px * options.core_margin : 0.0;
+  // The band's mean at each step t along the axis (NaN where too few of its pixels are usable).
+  const int reach = static_cast<int>(std::ceil(std::hypot(W, H) / 2));
+  const int n = 2 * reach + 1;
+  std::vector<double> profile(static_cast<size_t>(n), std::numeric_limits<double>::quiet_NaN());
+  const int band = options.veil_band_px;
+  for (int i = 0; i < n; ++i) {
+    const double t = i - reach;
+    double sum = 0;
+    int count = 0;
+    for (int s = -band; s <= band; ++s) {
+      const cv::Point2d p = center + t * dir + static_cast<double>(s) * across;
+      const int x = static_cast<int>(std::floor(p.x)), y = static_cast<int>(std::floor(p.y));
+      if (x < 0 || y < 0 || x >= W || y >= H || !valid.at<uchar>(y, x)) continue;
+      if (light.found && cv::norm(p - light.center) < keep_out) continue;
+      sum += residual.at<float>(y, x);
+      ++count;
+    }
+    if (count > band) profile[static_cast<size_t>(i)] = sum / count;
+  }
+  // Steps: mean over (t, t + w] minus mean over [t − w, t), each side needing w usable means.
+  const int w = options.veil_window_px;
+  auto sideMean = [&](int from, int to) {  // inclusive, may run off the profile
+    double sum = 0;
+    int k = 0;
+    for (int j = std::max(0, from); j <= std::min(n - 1, to); ++j)
+      if (!std::isnan(profile[static_cast<size_t>(j)])) {
+        sum += profile[static_cast<size_t>(j)];
+        ++k;
+      }
+    return k == to - from + 1 ? sum / k : std::numeric_limits<double>::quiet_NaN();
+  };
+  std::vector<double> step(static_cast<size_t>(n), 0.0);
+  for (int i = 0; i < n; ++i) {
+    const double d = sideMean(i + 1, i + w) - sideMean(i - w, i - 1);
+    if (!std::isnan(d)) step[static_cast<size_t>(i)] = d;
+  }
+  const double threshold = options.veil_step_sigma * noise_sigma;
+  // The usable stretch of the axis, for "stays up to the border".
+  int first = 0, last = n - 1;
+  while (first < n && std::isnan(profile[static_cast<size_t>(first)])) ++first;
+  while (last >= 0 && std::isnan(profile[static_cast<size_t>(last)])) --last;
+  for (int i = 0; i < n; ++i) {
+    const double d = step[static_cast<size_t>(i)];
+    if (!(std::abs(d) >= threshold)) continue;
+    bool peak = true;  // the strongest within ±w
+    for (int j = std::max(0, i - w); j <= std::min(n - 1, i + w) && peak; ++j)
+      if (std::abs(step[static_cast<size_t>(j)]) > std::abs(d) ||
+          (j < i && std::abs(step[static_cast<size_t>(j)]) == std::abs(d)))
+        peak = false;
+    if (!peak) continue;
+    const int sign = d > 0 ? 1 : -1;  // the bright side: +t or −t
+    // The bright side stays up to the border: the last window before the usable end is still at
+    // least half the step above the dark side.
+    const double dark = sign > 0 ? sideMean(i - w, i - 1) : sideMean(i + 1, i + w);
+    const double edge = sign > 0 ? sideMean(last - w + 1, last) : sideMean(first, first + w - 1);
+    if (std::isnan(dark) || std::isnan(edge) || !(edge - dark >= 0.5 * std::abs(d))) continue;
+    Detection det;
+    det.level_sigma = options.veil_step_sigma;
+    det.peak = std::abs(d);
+    const double radius = H;
+    const cv::Point2d crossing = center + static_cast<double>(i - reach) * dir;
+    const cv::Point2d c = crossing + static_cast<double>(sign) * radius * dir;
+    model::GhostParameters& g = det.seed;
+    g.channels = 1;
+    g.center_x = c.x;
+    g.center_y = c.y;
+    g.left = g.right = g.height = radius;
+    g.curvature_left = g.curvature_right = model::kEllipseCurvature;
+    g.border = {std::abs(d), 0, 0};
+    g.inside = {std::abs(d), 0, 0};
+    g.inside_falloff = std::max(1.0, 0.15 * radius);
+    g.inside_exponent = 1;
+    g.outside_falloff = 2;
+    g.outside_exponent = 1;
+    // The blob: the band on the bright side, from the step to the border.
+    cv::Mat mask = cv::Mat::zeros(residual.size(), CV_8U);
+    const int to = sign > 0 ? last : first;
+    for (int j = i; j != to + sign; j += sign)
+      for (int s = -band; s <= band; ++s) {
+        const cv::Point2d p = center + static_cast<double>(j - reach) * dir + static_cast<double>(s) * across;
+        const int x = static_cast<int>(std::floor(p.x)), y = static_cast<int>(std::floor(p.y));
+        if (x < 0 || y < 0 || x >= W || y >= H || !valid.at<uchar>(y, x)) continue;
+        mask.at<uchar>(y, x) = 255;
+      }
+    det.blob = cv::boundingRect(mask);
+    if (det.blob.empty()) continue;
+    det.mask = mask(det.blob).clone();
+    found.push_back(std::move(det));
+  }
+  std::sort(found.begin(), found.end(), [](const Detection& a, const Detection& b) { return a.peak > b.peak; });
   return found;
 }
 

@@ -888,6 +888,9 @@ class CaptureFitter {
     record.light_zone_px = light_full.zone_radius_px;
     const LightImage light = light_full.atLevel(kd);
     auto candidates = detectGhosts(residual, level.valid, level.noise_sigma, light, options_.detection);
+    if (options_.detection.find_veils)
+      for (auto& veil : detectVeilEdges(residual, level.valid, level.noise_sigma, light, options_.detection))
+        candidates.push_back(std::move(veil));
     for (const auto& c : candidates) {
       GhostParameters grey = c.seed;
       grey.center_x *= kd;
