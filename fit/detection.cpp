@@ -207,13 +207,24 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
   return light_image;
 }
 
-double flareAxisOffset(cv::Point2d point, const LightImage& light, cv::Size size) {
+namespace {
+
+// The flare axis's unit direction from the image centre (see flareAxisOffset).
+cv::Point2d flareAxisDirection(const LightImage& light, cv::Size size) {
   const cv::Point2d center(size.width / 2.0, size.height / 2.0);
   cv::Point2d dir(1, 0);
   if (light.found && cv::norm(light.center - center) > 0.05 * size.width) {
     dir = light.center - center;
     dir /= cv::norm(dir);
   }
+  return dir;
+}
+
+}  // namespace
+
+double flareAxisOffset(cv::Point2d point, const LightImage& light, cv::Size size) {
+  const cv::Point2d center(size.width / 2.0, size.height / 2.0);
+  const cv::Point2d dir = flareAxisDirection(light, size);
   const cv::Point2d d = point - center;
   return std::abs(d.x * dir.y - d.y * dir.x);
 }
@@ -340,29 +351,31 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
   if (!(noise_sigma > 0)) return found;
   const int W = residual.cols, H = residual.rows;
   const cv::Point2d center(W / 2.0, H / 2.0);
-  // The axis as flareAxisOffset draws it: through the image centre towards the light.
-  cv::Point2d dir(1, 0);
-  if (light.found && cv::norm(light.center - center) > 0.05 * W) {
-    dir = light.center - center;
-    dir /= cv::norm(dir);
-  }
+  const cv::Point2d dir = flareAxisDirection(light, residual.size());
   const cv::Point2d across(-dir.y, dir.x);
   const double keep_out = light.found ? light.core_radius_px * options.core_margin : 0.0;
-  // The band's mean at each step t along the axis (NaN where too few of its pixels are usable).
+  // Axis position i (t = i − reach pixels from the centre), s pixels across: its pixel, when
+  // inside the frame and valid.
   const int reach = static_cast<int>(std::ceil(std::hypot(W, H) / 2));
   const int n = 2 * reach + 1;
+  auto pixelAt = [&](int i, int s, cv::Point* px) {
+    const cv::Point2d p = center + static_cast<double>(i - reach) * dir + static_cast<double>(s) * across;
+    *px = cv::Point(static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)));
+    return px->x >= 0 && px->y >= 0 && px->x < W && px->y < H && valid.at<uchar>(*px) != 0;
+  };
+  // The band's mean at each position (NaN unless more than half its pixels are usable).
   std::vector<double> profile(static_cast<size_t>(n), std::numeric_limits<double>::quiet_NaN());
   const int band = options.veil_band_px;
   for (int i = 0; i < n; ++i) {
-    const double t = i - reach;
     double sum = 0;
     int count = 0;
     for (int s = -band; s <= band; ++s) {
-      const cv::Point2d p = center + t * dir + static_cast<double>(s) * across;
-      const int x = static_cast<int>(std::floor(p.x)), y = static_cast<int>(std::floor(p.y));
-      if (x < 0 || y < 0 || x >= W || y >= H || !valid.at<uchar>(y, x)) continue;
-      if (light.found && cv::norm(p - light.center) < keep_out) continue;
-      sum += residual.at<float>(y, x);
+      cv::Point px;
+      if (!pixelAt(i, s, &px)) continue;
+      if (light.found && cv::norm(center + static_cast<double>(i - reach) * dir +
+                                  static_cast<double>(s) * across - light.center) < keep_out)
+        continue;
+      sum += residual.at<float>(px);
       ++count;
     }
     if (count > band) profile[static_cast<size_t>(i)] = sum / count;
@@ -392,7 +405,7 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
   for (int i = 0; i < n; ++i) {
     const double d = step[static_cast<size_t>(i)];
     if (!(std::abs(d) >= threshold)) continue;
-    bool peak = true;  // the strongest within ±w
+    bool peak = true;  // the strongest within ±w (the first of equals)
     for (int j = std::max(0, i - w); j <= std::min(n - 1, i + w) && peak; ++j)
       if (std::abs(step[static_cast<size_t>(j)]) > std::abs(d) ||
           (j < i && std::abs(step[static_cast<size_t>(j)]) == std::abs(d)))
@@ -427,10 +440,8 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
     const int to = sign > 0 ? last : first;
     for (int j = i; j != to + sign; j += sign)
       for (int s = -band; s <= band; ++s) {
-        const cv::Point2d p = center + static_cast<double>(j - reach) * dir + static_cast<double>(s) * across;
-        const int x = static_cast<int>(std::floor(p.x)), y = static_cast<int>(std::floor(p.y));
-        if (x < 0 || y < 0 || x >= W || y >= H || !valid.at<uchar>(y, x)) continue;
-        mask.at<uchar>(y, x) = 255;
+        cv::Point px;
+        if (pixelAt(j, s, &px)) mask.at<uchar>(px) = 255;
       }
     det.blob = cv::boundingRect(mask);
     if (det.blob.empty()) continue;
