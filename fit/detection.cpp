@@ -354,12 +354,14 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
   const cv::Point2d dir = flareAxisDirection(light, residual.size());
   const cv::Point2d across(-dir.y, dir.x);
   const double keep_out = light.found ? light.core_radius_px * options.core_margin : 0.0;
-  // Axis position i (t = i − reach pixels from the centre), s pixels across: its pixel, when
-  // inside the frame and valid.
+  // The point at axis position i (t = i − reach pixels from the centre), s pixels across, and
+  // its pixel, when inside the frame and valid.
   const int reach = static_cast<int>(std::ceil(std::hypot(W, H) / 2));
   const int n = 2 * reach + 1;
-  auto pixelAt = [&](int i, int s, cv::Point* px) {
-    const cv::Point2d p = center + static_cast<double>(i - reach) * dir + static_cast<double>(s) * across;
+  auto pointAt = [&](int i, int s) {
+    return center + static_cast<double>(i - reach) * dir + static_cast<double>(s) * across;
+  };
+  auto usablePixel = [&](cv::Point2d p, cv::Point* px) {
     *px = cv::Point(static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)));
     return px->x >= 0 && px->y >= 0 && px->x < W && px->y < H && valid.at<uchar>(*px) != 0;
   };
@@ -370,11 +372,10 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
     double sum = 0;
     int count = 0;
     for (int s = -band; s <= band; ++s) {
+      const cv::Point2d p = pointAt(i, s);
       cv::Point px;
-      if (!pixelAt(i, s, &px)) continue;
-      if (light.found && cv::norm(center + static_cast<double>(i - reach) * dir +
-                                  static_cast<double>(s) * across - light.center) < keep_out)
-        continue;
+      if (!usablePixel(p, &px)) continue;
+      if (light.found && cv::norm(p - light.center) < keep_out) continue;
       sum += residual.at<float>(px);
       ++count;
     }
@@ -421,7 +422,7 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
     det.level_sigma = options.veil_step_sigma;
     det.peak = std::abs(d);
     const double radius = H;
-    const cv::Point2d crossing = center + static_cast<double>(i - reach) * dir;
+    const cv::Point2d crossing = pointAt(i, 0);
     const cv::Point2d c = crossing + static_cast<double>(sign) * radius * dir;
     model::GhostParameters& g = det.seed;
     g.channels = 1;
@@ -441,7 +442,7 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
     for (int j = i; j != to + sign; j += sign)
       for (int s = -band; s <= band; ++s) {
         cv::Point px;
-        if (pixelAt(j, s, &px)) mask.at<uchar>(px) = 255;
+        if (usablePixel(pointAt(j, s), &px)) mask.at<uchar>(px) = 255;
       }
     det.blob = cv::boundingRect(mask);
     if (det.blob.empty()) continue;
