@@ -283,6 +283,46 @@ inline double boxGap2(double px, double py, double x0, double x1, double y0, dou
   return gx * gx + gy * gy;
 }
 
+// A lower bound of g″(t) = |B′(t)|² + (B(t) − p)·B″(t) over the piece [a, b] whose box is
+// [x0, x1] × [y0, y1], by interval arithmetic: B − p lies in the box less p, B″ is linear in t
+// and B′ quadratic. Where it is positive, g is convex over the piece, so the piece holds at most
+// one minimum of the distance: inside it where the slope turns from falling to rising, else at
+// an end. Points far outside a ghost (the fall-off of a glow reaches hundreds of pixels) are
+// farther than the radius of curvature, where the test in searchPiece cannot tell, while g is
+// convex about their nearest point (B″ points away from p there); without this bound their
+// search split the pieces next to the minimum down to the last depth.
+inline double convexityLowerBound(const PowerCubic& c, double px, double py, double a, double b,
+                                  double x0, double x1, double y0, double y1) {
+  // The range of q(t) = q0 + q1·t + q2·t² over [a, b]: its ends and its vertex.
+  auto quadratic = [a, b](double q0, double q1, double q2, double& lo, double& hi) {
+    const double qa = (q2 * a + q1) * a + q0, qb = (q2 * b + q1) * b + q0;
+    lo = std::min(qa, qb);
+    hi = std::max(qa, qb);
+    if (q2 != 0) {
+      const double tv = -q1 / (2 * q2);
+      if (tv > a && tv < b) {
+        const double qv = (q2 * tv + q1) * tv + q0;
+        lo = std::min(lo, qv);
+        hi = std::max(hi, qv);
+      }
+    }
+  };
+  auto least_square = [](double lo, double hi) { return lo > 0 ? lo * lo : hi < 0 ? hi * hi : 0.0; };
+  auto least_product = [](double u0, double u1, double v0, double v1) {
+    return std::min({u0 * v0, u0 * v1, u1 * v0, u1 * v1});
+  };
+  double dx0, dx1, dy0, dy1;
+  quadratic(c.x1, 2 * c.x2, 3 * c.x3, dx0, dx1);
+  quadratic(c.y1, 2 * c.y2, 3 * c.y3, dy0, dy1);
+  const double ddxa = c.ddx(a), ddxb = c.ddx(b), ddya = c.ddy(a), ddyb = c.ddy(b);
+  const double speed2 = least_square(dx0, dx1) + least_square(dy0, dy1);
+  const double bend = least_product(x0 - px, x1 - px, std::min(ddxa, ddxb), std::max(ddxa, ddxb)) +
+                      least_product(y0 - py, y1 - py, std::min(ddya, ddyb), std::max(ddya, ddyb));
+  // Rounding: each term is within a few ulps of its magnitude; demand a margin well above that.
+  const double sum = speed2 + bend;
+  return sum > 1e-9 * (speed2 + std::abs(bend)) ? sum : 0.0;
+}
+
 inline void searchPiece(const PowerCubic& c, int which, double px, double py, double a, double b,
                         double slope_a, double slope_b, double box_x0, double box_x1, double box_y0,
                         double box_y1, double curvature_radius, int depth, int newton_steps,
@@ -298,6 +338,7 @@ inline void searchPiece(const PowerCubic& c, int which, double px, double py, do
   const double fx = std::max(std::abs(box_x0 - px), std::abs(box_x1 - px));
   const double fy = std::max(std::abs(box_y0 - py), std::abs(box_y1 - py));
   if (fx * fx + fy * fy < curvature_radius * curvature_radius) return;  // at most one minimum
+  if (convexityLowerBound(c, px, py, a, b, box_x0, box_x1, box_y0, box_y1) > 0) return;  // the same
   if (std::sqrt(lower2) >= std::sqrt(std::min(best.d2, cutoff2)) - kDistanceTolerance) return;
   if (depth >= 6) return;
   splitPiece(c, which, px, py, a, b, slope_a, slope_b, curvature_radius, depth, newton_steps,
