@@ -269,7 +269,8 @@ inline constexpr double kDistanceTolerance = 1e-4;
 //    Newton finds the minimum inside;
 //  - the piece is done when it can hold no other minimum: every point of its box is closer to p
 //    than the radius of curvature (two minima need a maximum between them at a distance ≥ ρ,
-//    where g″ = |B′|²(1 − D/ρ) ≤ 0), or its box is within kDistanceTolerance of the best point;
+//    where g″ = |B′|²(1 − D/ρ) ≤ 0), or g″ > 0 over the whole piece (convexityLowerBound: the
+//    case of points farther than ρ), or its box is within kDistanceTolerance of the best point;
 //  - otherwise it is split in four and searched again (depth ≤ 6).
 // The ends are the caller's candidates.
 inline void splitPiece(const PowerCubic& c, int which, double px, double py,
