@@ -22,6 +22,11 @@ bool offImage(float min_x, float max_x, float min_y, float max_y, const SensorMa
   return max_x < 0 || max_y < 0 || min_x >= m.width_px || min_y >= m.height_px;
 }
 
+// Margin of RasterTriangle::rim_clear and aperture_clear beyond a whole footprint (in r_rel and
+// aperture units): far above the rounding of the interpolated values (~1e-7), so 0.5 + d/footprint
+// stays above 1 at every pixel inside the triangle.
+constexpr float kClearMargin = 1e-5f;
+
 bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const SensorMapping& m,
                   const Aperture& aperture, double cell_flux, const cv::Vec3f& weight, int batch,
                   RasterTriangle* out) {
@@ -104,13 +109,16 @@ bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const Senso
             p2.u * nx + p2.v * ny >= limit)
           return false;
       }
-    interior = interior && aperture.signedDistance(p0.u, p0.v) >= half &&
-               aperture.signedDistance(p1.u, p1.v) >= half &&
-               aperture.signedDistance(p2.u, p2.v) >= half;
+    const float d_min = std::min({aperture.signedDistance(p0.u, p0.v), aperture.signedDistance(p1.u, p1.v),
+                                  aperture.signedDistance(p2.u, p2.v)});
+    interior = interior && d_min >= half;
+    t.aperture_clear = d_min >= t.aperture_footprint + kClearMargin;
   } else {
     interior = false;
+    t.aperture_clear = false;
   }
   t.interior = interior;
+  t.rim_clear = std::max({p0.r, p1.r, p2.r}) <= 1.0f - t.rim_footprint - kClearMargin;
   // Flux of the triangle's pupil area spread over its sensor area (Hullin 2011 §3.2: intensity
   // from the area ratio of the ray-grid cells), in relative irradiance.
   const double scale = cell_flux / (area2 * m.pixel_pitch_mm * m.pixel_pitch_mm);
@@ -252,7 +260,7 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
   const bool tl0 = t.top_left[0], tl1 = t.top_left[1], tl2 = t.top_left[2];
   const float a0 = t.ea[0], a1 = t.ea[1], a2 = t.ea[2];
   const float t0 = t.t0, ty = t.ty, tx = t.tx, ox = t.ox;
-  const bool interior = t.interior;
+  const bool interior = t.interior, rim_clear = t.rim_clear, aperture_clear = t.aperture_clear;
   // Interior triangles: the top-left test is folded into one threshold per edge (e > 0 is
   // e ≥ the smallest denormal) so the loop is branch-free and vectorises.
   const float th0 = tl0 ? 0.0f : std::numeric_limits<float>::denorm_min();
@@ -384,29 +392,37 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
           const Vec8 e0 = a0 * dx + b0, e1 = a1 * dx + b1, e2 = a2 * dx + b2;
           const Int8 x = xb + kLaneIndex;
           const Int8 in = (e0 >= th0) & (e1 >= th1) & (e2 >= th2) & (x >= xs) & (x <= xe);
-          const Vec8 r = (t.r0 + t.rx * dx) + r_row;
-          Vec8 rim = 0.5f + (1.0f - r) / rim_footprint;
-          rim = rim < 0.0f ? Vec8{} : (1.0f < rim ? kOnes : rim);
-          const Vec8 u = (t.u0 + t.ux * dx) + u_row;
-          const Vec8 v = (t.v0 + t.vx * dx) + v_row;
-          Vec8 d = Vec8{};
-          if (circle || rounding != 0.0f) {
-            const Vec8 q = u * u + v * v;
-            Vec8 root;
-            for (int k = 0; k < kChunk; ++k) root[k] = std::sqrt(q[k]);
-            d = 1.0f - root;
+          // C or A of a triangle clear of the rims or of the iris is 1 at every pixel (what the
+          // clamps below give there, exactly): most rim band triangles lie along one edge only.
+          Vec8 rim = kOnes;
+          if (!rim_clear) {
+            const Vec8 r = (t.r0 + t.rx * dx) + r_row;
+            rim = 0.5f + (1.0f - r) / rim_footprint;
+            rim = rim < 0.0f ? Vec8{} : (1.0f < rim ? kOnes : rim);
           }
-          if (!circle) {
-            Vec8 m = Vec8{} - 1e30f;
-            for (int k = 0; k < edges; ++k) {
-              const Vec8 e = u * edge_nx[k] + v * edge_ny[k];
-              m = m < e ? e : m;
+          Vec8 a = kOnes;
+          if (!aperture_clear) {
+            const Vec8 u = (t.u0 + t.ux * dx) + u_row;
+            const Vec8 v = (t.v0 + t.vx * dx) + v_row;
+            Vec8 d = Vec8{};
+            if (circle || rounding != 0.0f) {
+              const Vec8 q = u * u + v * v;
+              Vec8 root;
+              for (int k = 0; k < kChunk; ++k) root[k] = std::sqrt(q[k]);
+              d = 1.0f - root;
             }
-            const Vec8 polygon = apothem - m;
-            d = rounding == 0.0f ? polygon : (1.0f - rounding) * polygon + rounding * d;
+            if (!circle) {
+              Vec8 m = Vec8{} - 1e30f;
+              for (int k = 0; k < edges; ++k) {
+                const Vec8 e = u * edge_nx[k] + v * edge_ny[k];
+                m = m < e ? e : m;
+              }
+              const Vec8 polygon = apothem - m;
+              d = rounding == 0.0f ? polygon : (1.0f - rounding) * polygon + rounding * d;
+            }
+            a = 0.5f + d / aperture_footprint;
+            a = a < 0.0f ? Vec8{} : (1.0f < a ? kOnes : a);
           }
-          Vec8 a = 0.5f + d / aperture_footprint;
-          a = a < 0.0f ? Vec8{} : (1.0f < a ? kOnes : a);
           Vec8 tr = (t.t0 + t.tx * dx) + t_row;
           tr = 0.0f < tr ? tr : Vec8{};
           Vec8 shade = (tr * a) * rim;

@@ -35,6 +35,10 @@ struct RasterTriangle {
   // Every point lies inside the aperture and the rims by at least half a pixel footprint
   // (the distance functions are concave, so checking the corners suffices): A = C = 1.
   bool interior;
+  // Rim band triangles (not interior): every point lies inside the rims, or inside the aperture,
+  // by a whole footprint and 1e-5 more, so that C = 1, or A = 1, comes out exactly at every pixel
+  // however the interpolation rounds; the rasterizer then skips computing it.
+  bool rim_clear, aperture_clear;
   // Below kSplatArea pixels the triangle's flux is splatted over points inside it instead of
   // sampled at pixel centres; its corners (pixels) and area are kept for that.
   bool splat;
