@@ -248,6 +248,7 @@ void rasterizeInto(const RasterTriangle& t, const Aperture& aperture, int x0, in
   // a time, so it is the same. One row at a time, the set-up was 40 % of this function's
   // instructions on a 1280×720 frame, where a ghost's triangles are some 25 pixels wide.
   constexpr int kRows = 32;
+  static_assert(kRows % 8 == 0, "the set-up loops run over whole vectors of 8 rows");
   const float inf = std::numeric_limits<float>::infinity();
   const float ox_half = t.ox - 0.5f;
   const float fx0 = static_cast<float>(x0), fx1 = static_cast<float>(x1);
