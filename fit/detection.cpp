@@ -209,6 +209,19 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
 
 namespace {
 
+// The rest of a seed whose centre and size are set, the same for blobs and veils: an elliptic
+// outline, border and inside values `border` and `inside`, an inside fall-off of 15 % of the
+// smaller half-size, an outside fall-off of 2 px (the blob's margin), linear exponents.
+void finishSeed(double border, double inside, model::GhostParameters* g) {
+  g->curvature_left = g->curvature_right = model::kEllipseCurvature;
+  g->border = {border, 0, 0};
+  g->inside = {inside, 0, 0};
+  g->inside_falloff = std::max(1.0, 0.15 * std::min(g->left + g->right, 2 * g->height) / 2);
+  g->inside_exponent = 1;
+  g->outside_falloff = 2;
+  g->outside_exponent = 1;
+}
+
 // The flare axis's unit direction from the image centre (see flareAxisOffset).
 cv::Point2d flareAxisDirection(const LightImage& light, cv::Size size) {
   const cv::Point2d center(size.width / 2.0, size.height / 2.0);
@@ -326,13 +339,7 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
       if (g.left > 2 * shrink) g.left -= shrink;
       if (g.right > 2 * shrink) g.right -= shrink;
       if (g.height > 2 * shrink) g.height -= shrink;
-      g.curvature_left = g.curvature_right = model::kEllipseCurvature;
-      g.border = {std::max(high, 1e-12), 0, 0};
-      g.inside = {std::max(median, 0.0), 0, 0};
-      g.inside_falloff = std::max(1.0, 0.15 * std::min(g.left + g.right, 2 * g.height) / 2);
-      g.inside_exponent = 1;
-      g.outside_falloff = 2;
-      g.outside_exponent = 1;
+      finishSeed(std::max(high, 1e-12), std::max(median, 0.0), &g);
       found.push_back(d);
       claimed(box).setTo(255, blob);
     }
@@ -429,13 +436,7 @@ std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& v
     g.center_x = c.x;
     g.center_y = c.y;
     g.left = g.right = g.height = radius;
-    g.curvature_left = g.curvature_right = model::kEllipseCurvature;
-    g.border = {std::abs(d), 0, 0};
-    g.inside = {std::abs(d), 0, 0};
-    g.inside_falloff = std::max(1.0, 0.15 * radius);
-    g.inside_exponent = 1;
-    g.outside_falloff = 2;
-    g.outside_exponent = 1;
+    finishSeed(std::abs(d), std::abs(d), &g);
     // The blob: the band on the bright side, from the step to the border.
     cv::Mat mask = cv::Mat::zeros(residual.size(), CV_8U);
     const int to = sign > 0 ? last : first;
