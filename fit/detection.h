@@ -63,6 +63,8 @@ struct DetectionOptions {
   // fell from 0.91 to 0.78, and to 0.42–0.98 under 1 % changes of λ and the shape prior
   // (0.92–0.97 without): veils seeded while the light was in the frame changed the model's mean flux
   // at 0–8° by up to 2× (7.4°: 0.042 against 0.021), where the renderer's falls steadily with θ.
+  // (All measured with the fitter of commit fedfafa. The nearest-point search's convexity bound
+  // since then moved every fit, as any change the size of rounding does; not measured again.)
   bool find_veils = false;
   // The search: the residual is averaged over a band of 2 veil_band_px + 1 pixels across the
   // flare axis, a step is the difference of the means over veil_window_px on either side of a
