@@ -376,11 +376,11 @@ void GroupCost::sampleResiduals(int sample, double* residuals) const {
   }
 }
 
-void GroupCost::sampleJacobian(int sample, int ghost, double* jacobian) const {
+bool GroupCost::sampleJacobian(int sample, int ghost, double* jacobian) const {
   const cv::Point p = samples_[sample];
   const int n = parameters_per_ghost_;
   std::fill(jacobian, jacobian + 2 * channels_ * n, 0.0);
-  if (!has_jacobians_ || jacobian_rect_.empty()) return;
+  if (!has_jacobians_ || jacobian_rect_.empty()) return false;
   const cv::Rect& data_rect = jacobian_rect_[ghost][0];
   const cv::Rect& edge_rect = jacobian_rect_[ghost][1];
   const bool edge_ok = edge_valid_.at<uchar>(p) != 0;
@@ -393,8 +393,10 @@ void GroupCost::sampleJacobian(int sample, int ghost, double* jacobian) const {
       for (int c = 0; c < channels_; ++c) jacobian[(first_row + c) * n + k] = v[c];
     }
   };
-  if (data_rect.contains(p)) copy(jacobian_data_planes_[ghost], p - data_rect.tl(), 0);
-  if (edge_ok && edge_rect.contains(p)) copy(jacobian_edge_planes_[ghost], p - edge_rect.tl(), channels_);
+  const bool data = data_rect.contains(p), edge = edge_ok && edge_rect.contains(p);
+  if (data) copy(jacobian_data_planes_[ghost], p - data_rect.tl(), 0);
+  if (edge) copy(jacobian_edge_planes_[ghost], p - edge_rect.tl(), channels_);
+  return data || edge;
 }
 
 void GroupCost::priorResiduals(int ghost, const double* parameters, double* residuals,
@@ -426,6 +428,26 @@ double GroupCost::loss(double u) const {
   if (options_.loss_scale <= 0) return u;
   const double b = options_.loss_scale * options_.loss_scale;
   return b * std::log1p(u / b);
+}
+
+double GroupCost::robustSample(int sample, double* residuals, double* const* jacobians) const {
+  const int m = residualsPerSample(), n = parameters_per_ghost_;
+  sampleResiduals(sample, residuals);
+  double sqrt_rho1 = 1, rest = 0;  // √ρ′(u) and ρ(u) − ρ′(u)·u
+  if (options_.loss_scale > 0) {
+    const double b = options_.loss_scale * options_.loss_scale;
+    double u = 0;
+    for (int i = 0; i < m; ++i) u += residuals[i] * residuals[i];
+    const double x = u / b;
+    sqrt_rho1 = 1 / std::sqrt(1 + x);
+    rest = std::max(0.0, b * (std::log1p(x) - x / (1 + x)));
+  }
+  if (jacobians != nullptr)
+    for (int g = 0; g < ghost_count_; ++g)
+      if (double* J = jacobians[g]; J != nullptr && sampleJacobian(sample, g, J) && sqrt_rho1 != 1)
+        for (int i = 0; i < m * n; ++i) J[i] *= sqrt_rho1;
+  for (int i = 0; i < m; ++i) residuals[i] *= sqrt_rho1;
+  return rest;
 }
 
 double GroupCost::totalCost() const {

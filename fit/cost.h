@@ -194,7 +194,8 @@ class GroupCost {
   // last evaluate() computed them): residuals[2·channels], jacobian of ghost g row-major
   // [2·channels × parametersPerGhost()].
   void sampleResiduals(int sample, double* residuals) const;
-  void sampleJacobian(int sample, int ghost, double* jacobian) const;
+  // sampleJacobian returns false where the rows are all zero (the pixel is beyond the ghost's reach).
+  bool sampleJacobian(int sample, int ghost, double* jacobian) const;
   bool hasJacobians() const { return has_jacobians_; }
 
   // The shape prior (see above): residuals per ghost, and their Jacobian row-major
@@ -204,6 +205,14 @@ class GroupCost {
 
   // The Cauchy loss ρ(u) of this cost (u = squared norm of a sample's residuals).
   double loss(double squared_norm) const;
+  // A sample's residuals and, when `jacobians` is not null (one row-major [2·channels ×
+  // parametersPerGhost()] array per ghost, null entries skipped), their Jacobians, weighted as
+  // Ceres weights a residual block with this loss (its Corrector, Triggs et al. 2000, for a loss
+  // with ρ″ ≤ 0 like Cauchy's): r̃ = √ρ′(u)·r, J̃ = √ρ′(u)·J. Returns ρ(u) − ρ′(u)·u ≥ 0, the part of
+  // the sample's cost ½ρ(u) that ½‖r̃‖² leaves out. A residual block of many samples then has the
+  // loss per sample, the Gauss–Newton model and gradient of per-sample blocks, and its exact cost
+  // with one more residual, √(Σ of these), constant in the parameters.
+  double robustSample(int sample, double* residuals, double* const* jacobians) const;
   // The cost from the stored residuals.
   double totalCost() const;
 

@@ -7,6 +7,7 @@
 
 #include <ceres/ceres.h>
 #include <ceres/gradient_checker.h>
+#include <opencv2/imgproc.hpp>
 #include <gtest/gtest.h>
 
 #include "fit/group_solver.h"
@@ -127,6 +128,53 @@ TEST(GroupCost, AnalyticJacobianMatchesGradientChecker) {
           << "ghost " << g << " parameter " << model::parameterName(k, 1) << ": |analytic| "
           << analytic.col(k).norm() << " |numeric| " << norm;
     }
+  }
+}
+
+// The solver's residual blocks span tiles of pixels with the loss per pixel inside them
+// (GroupCost::robustSample). Summed over the samples, the weighted residuals and their rests must
+// give the cost exactly, and the weighted Jacobians times the weighted residuals its gradient, here
+// with pixels far in the Cauchy loss's outlier range (an unmodelled blob beside the ghost).
+TEST(GroupCost, RobustSamplesGiveTheCostAndItsGradient) {
+  const cv::Size size(96, 72);
+  cv::Mat frame = model::renderGhosts(std::vector{ghost(44, 36, 18, 22, 15, 1.0, 0.4)}, size, 1);
+  cv::circle(frame, {70, 36}, 6, cv::Scalar(3.0), cv::FILLED);
+  cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  CostOptions options;
+  options.prior_fraction = 0;  // the prior is its own residual block
+  ASSERT_GT(options.loss_scale, 0);
+  EdgeFilter edge(options);
+  FramePyramid data(frame, valid, edge);
+  const std::vector<GhostParameters> at = {ghost(45.3, 35.2, 17, 23.5, 14.2, 0.9, 0.45)};
+  GroupCost cost(data, edge, {}, at, options);
+  const double total = cost.evaluate(at, true);
+  const int m = cost.residualsPerSample(), n = cost.parametersPerGhost();
+  std::vector<double> r(m), J(static_cast<size_t>(m) * n), gradient(n, 0.0);
+  double* jacobians[] = {J.data()};
+  double sum = 0;
+  int outliers = 0;
+  for (size_t i = 0; i < cost.samples().size(); ++i) {
+    const double rest = cost.robustSample(static_cast<int>(i), r.data(), jacobians);
+    double weighted = 0;
+    for (double v : r) weighted += v * v;
+    outliers += rest > weighted;
+    sum += 0.5 * (weighted + rest);
+    for (int row = 0; row < m; ++row)
+      for (int k = 0; k < n; ++k) gradient[k] += J[row * n + k] * r[row];
+  }
+  EXPECT_GT(outliers, 20);
+  EXPECT_NEAR(sum, total, 1e-9 * total);
+  // Central differences of the cost; the fall-off ends are kinks, so small steps.
+  auto p = model::toParameterVector(at[0]);
+  for (int k = 0; k < n; ++k) {
+    const double h = 1e-5 * std::max(1.0, std::abs(p[k]));
+    auto plus = p, minus = p;
+    plus[k] += h;
+    minus[k] -= h;
+    const double numeric = (cost.evaluate(std::vector{model::fromParameterVector(plus, 1)}, false) -
+                            cost.evaluate(std::vector{model::fromParameterVector(minus, 1)}, false)) /
+                           (2 * h);
+    EXPECT_NEAR(gradient[k], numeric, 0.02 * std::abs(numeric) + 1e-6) << model::parameterName(k, 1);
   }
 }
 

@@ -1,9 +1,11 @@
 #include "fit/group_solver.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
 #include <ceres/ceres.h>
+#include <tbb/parallel_for.h>
 
 #include "common/error.h"
 
@@ -67,45 +69,111 @@ std::vector<std::vector<double>> clampedSeeds(const GroupCost& cost,
   return blocks;
 }
 
-// Renders once per evaluation point for all residual blocks.
+// The region's samples in tiles of kTilePx × kTilePx level pixels, and every tile's rows at the
+// last evaluation point: its samples' residuals and Jacobian rows weighted by their loss
+// (GroupCost::robustSample), then one residual that carries the rest of the tile's cost, with
+// Jacobian rows of 0. Tiles lie one after the other, each tile's rows contiguous. Filled on every
+// thread (TBB), each sample into its own rows, so the result does not depend on the thread count.
+class TileRows {
+ public:
+  static constexpr int kTilePx = 16;
+
+  explicit TileRows(const GroupCost& cost)
+      : cost_(cost), m_(cost.residualsPerSample()), n_(cost.parametersPerGhost()) {
+    const auto& samples = cost.samples();
+    const int columns = (cost.region().width + kTilePx - 1) / kTilePx;
+    const int rows = (cost.region().height + kTilePx - 1) / kTilePx;
+    std::vector<std::vector<int>> tiles(static_cast<size_t>(columns) * rows);
+    for (size_t i = 0; i < samples.size(); ++i)
+      tiles[(samples[i].y / kTilePx) * columns + samples[i].x / kTilePx].push_back(static_cast<int>(i));
+    first_.push_back(0);
+    for (const auto& tile : tiles) {
+      if (tile.empty()) continue;
+      order_.insert(order_.end(), tile.begin(), tile.end());
+      first_.push_back(static_cast<int>(order_.size()));
+    }
+    const size_t total_rows = order_.size() * m_ + tileCount();
+    residuals_.resize(total_rows);
+    jacobians_.assign(cost.ghostCount(), std::vector<double>(total_rows * n_));
+  }
+
+  int tileCount() const { return static_cast<int>(first_.size()) - 1; }
+  int rowCount(int tile) const { return (first_[tile + 1] - first_[tile]) * m_ + 1; }
+  const double* residuals(int tile) const { return residuals_.data() + firstRow(tile); }
+  const double* jacobian(int tile, int ghost) const { return jacobians_[ghost].data() + firstRow(tile) * n_; }
+
+  // Reads the cost's images at its last evaluation point.
+  void fill(bool with_jacobians) {
+    tbb::parallel_for(0, tileCount(), [&](int tile) {
+      std::vector<double*> jacobians(jacobians_.size(), nullptr);
+      size_t row = firstRow(tile);
+      double rest = 0;
+      for (int j = first_[tile]; j < first_[tile + 1]; ++j, row += m_) {
+        if (with_jacobians)
+          for (size_t g = 0; g < jacobians_.size(); ++g) jacobians[g] = jacobians_[g].data() + row * n_;
+        rest += cost_.robustSample(order_[j], residuals_.data() + row,
+                                   with_jacobians ? jacobians.data() : nullptr);
+      }
+      residuals_[row] = std::sqrt(rest);  // its Jacobian rows stay 0
+    });
+  }
+
+ private:
+  size_t firstRow(int tile) const { return static_cast<size_t>(first_[tile]) * m_ + tile; }
+
+  const GroupCost& cost_;
+  size_t m_, n_;            // residuals per sample, parameters per ghost
+  std::vector<int> order_;  // sample indices, tile after tile
+  std::vector<int> first_;  // tile t holds order_[first_[t]] .. order_[first_[t + 1] − 1]
+  std::vector<double> residuals_;
+  std::vector<std::vector<double>> jacobians_;  // per ghost, row-major rows × parameters
+};
+
+// Renders once per evaluation point for all residual blocks and fills their rows.
 class RenderCallback : public ceres::EvaluationCallback {
  public:
-  RenderCallback(GroupCost& cost, std::vector<std::vector<double>>& blocks)
-      : cost_(cost), blocks_(blocks) {}
+  RenderCallback(GroupCost& cost, TileRows& rows, std::vector<std::vector<double>>& blocks)
+      : cost_(cost), rows_(rows), blocks_(blocks) {}
   void PrepareForEvaluation(bool evaluate_jacobians, bool new_evaluation_point) override {
     if (!new_evaluation_point && (!evaluate_jacobians || cost_.hasJacobians()) && evaluated_) return;
     std::vector<const double*> p;
     for (const auto& b : blocks_) p.push_back(b.data());
     cost_.prepare(p, evaluate_jacobians);
+    rows_.fill(evaluate_jacobians);
     evaluated_ = true;
   }
 
  private:
   GroupCost& cost_;
+  TileRows& rows_;
   std::vector<std::vector<double>>& blocks_;
   bool evaluated_ = false;
 };
 
-// One sampled pixel: its data and edge residuals, analytic Jacobians from the shared images.
-class PixelResidual : public ceres::CostFunction {
+// One tile of the region: its samples' rows as filled by the callback.
+class TileResidual : public ceres::CostFunction {
  public:
-  PixelResidual(const GroupCost& cost, int sample) : cost_(cost), sample_(sample) {
-    set_num_residuals(cost.residualsPerSample());
+  TileResidual(const GroupCost& cost, const TileRows& rows, int tile)
+      : rows_(rows), tile_(tile), rows_per_tile_(rows.rowCount(tile)) {
+    set_num_residuals(rows_per_tile_);
     for (int g = 0; g < cost.ghostCount(); ++g)
       mutable_parameter_block_sizes()->push_back(cost.parametersPerGhost());
   }
   bool Evaluate(double const* const* /*parameters*/, double* residuals,
                 double** jacobians) const override {
-    cost_.sampleResiduals(sample_, residuals);
+    std::copy_n(rows_.residuals(tile_), rows_per_tile_, residuals);
     if (jacobians != nullptr)
-      for (int g = 0; g < cost_.ghostCount(); ++g)
-        if (jacobians[g] != nullptr) cost_.sampleJacobian(sample_, g, jacobians[g]);
+      for (size_t g = 0; g < parameter_block_sizes().size(); ++g)
+        if (jacobians[g] != nullptr)
+          std::copy_n(rows_.jacobian(tile_, static_cast<int>(g)),
+                      static_cast<size_t>(rows_per_tile_) * parameter_block_sizes()[g], jacobians[g]);
     return true;
   }
 
  private:
-  const GroupCost& cost_;
-  int sample_;
+  const TileRows& rows_;
+  int tile_;
+  int rows_per_tile_;
 };
 
 // The shape prior of one ghost (fit/cost.h), an analytic block on that ghost's parameters.
@@ -153,19 +221,18 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
     result.termination = "no valid pixels";
     return result;
   }
-  RenderCallback render(cost, blocks);
+  TileRows rows(cost);
+  RenderCallback render(cost, rows, blocks);
   ceres::Problem::Options problem_options;
   problem_options.evaluation_callback = &render;
-  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
-  std::unique_ptr<ceres::LossFunction> loss;
-  // Per-pixel Cauchy loss (FITTING_NOTES: robust against unmodelled blobs at the same cost).
-  // Ceres's CauchyLoss(a) is ρ(u) = a²·ln(1 + u/a²), the same as GroupCost::loss.
   std::vector<double*> pointers;
   for (auto& b : blocks) pointers.push_back(b.data());
-  loss.reset(cost.lossScale() > 0 ? new ceres::CauchyLoss(cost.lossScale()) : nullptr);
-  for (size_t i = 0; i < cost.samples().size(); ++i)
-    problem.AddResidualBlock(new PixelResidual(cost, static_cast<int>(i)), loss.get(), pointers);
+  // Residuals over tiles of the region, the loss per pixel inside them (GroupCost::robustSample;
+  // FITTING_NOTES: per-pixel Cauchy is robust against unmodelled blobs): the steps of blocks of one
+  // pixel each, without Ceres's bookkeeping per block, and the rows filled on every thread.
+  for (int t = 0; t < rows.tileCount(); ++t)
+    problem.AddResidualBlock(new TileResidual(cost, rows, t), nullptr, pointers);
   if (cost.priorResidualCount() > 0)
     for (size_t g = 0; g < blocks.size(); ++g)
       problem.AddResidualBlock(new PriorResidual(cost, static_cast<int>(g)), nullptr, pointers[g]);
