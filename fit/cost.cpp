@@ -347,7 +347,7 @@ void GroupCost::evaluateImages(std::span<const model::GhostParameters> input, bo
         e(edge_rect - spread.tl()).convertTo(jacobian_edge_[g][k], CV_32F, edge_factor);
       }
     });
-    // Raw planes for sampleJacobian, which Ceres calls once per pixel and ghost.
+    // Raw planes for sampleJacobian, called once per pixel and ghost.
     auto planes = [&](const std::vector<std::vector<cv::Mat>>& images) {
       std::vector<std::vector<JacobianPlane>> out(ghost_count_, std::vector<JacobianPlane>(parameters_per_ghost_));
       for (int g = 0; g < ghost_count_; ++g)

@@ -2,16 +2,17 @@
 // Fits the parameters of a group of overlapping ghosts in one frame by minimising a GroupCost
 // (fit/cost.h), with either optimizer:
 //
-//  - kCeres (default): Ceres's Levenberg–Marquardt trust region with the parameters' bounds, one
-//    residual block per sampled pixel with Cauchy's loss (shared/FITTING_NOTES.md), analytic
-//    Jacobians from model/'s derivative images (the edge part is E applied to them), a dense QR
-//    solve. The model is rendered once per evaluation point through a ceres::EvaluationCallback,
-//    on every thread (TBB); the residual blocks then read the shared images on one thread: Ceres
-//    sums its blocks' costs per thread, so with more threads the cost's rounding, the steps it
-//    accepts and so the whole capture's fit depended on the machine's thread count (data_synthetic
-//    Heliar: Spearman ρ of issue 7 0.79 with 2 threads, 0.90 with 1). One thread is no slower:
-//    the blocks only read pixels, and their threads cost more to synchronise than they saved (that
-//    fit: 35.5 against 39.3 s of CPU time, 48.7 against 52.4 s wall on a busy 2-core machine).
+//  - kCeres (default): Ceres's Levenberg–Marquardt trust region with the parameters' bounds,
+//    residual blocks over tiles of 16×16 pixels of the region with Cauchy's loss per pixel inside
+//    them (shared/FITTING_NOTES.md; GroupCost::robustSample weights each pixel as Ceres's own loss
+//    would, so the steps are those of one block per pixel without Ceres's bookkeeping per block),
+//    analytic Jacobians from model/'s derivative images (the edge part is E applied to them), a
+//    dense QR solve. The model is rendered and every tile's rows filled once per evaluation point
+//    through a ceres::EvaluationCallback, on every thread (TBB), each pixel into its own rows;
+//    Ceres itself runs on one thread: it sums its blocks' costs per thread, so with more threads
+//    the cost's rounding, the steps it accepts and so the whole capture's fit depended on the
+//    machine's thread count (data_synthetic Heliar: Spearman ρ of issue 7 0.79 with 2 threads, 0.90
+//    with 1).
 //  - kWalchGd: the paper's optimizer (Walch et al. 2018 §3.3.2) as the baseline: gradient descent
 //    with central-difference gradients, one step size per parameter, a global learning rate
 //    multiplied by 0.8 every 100 iterations, online updates in a fixed order, shape before shade.
@@ -85,7 +86,7 @@ GroupFitResult solveGroup(GroupCost& cost, std::span<const model::GhostParameter
 
 // The whole group cost as one ceres::CostFunction of the ghosts' parameter blocks (one block per
 // ghost, parametersPerGhost() each; residuals: samples × residualsPerSample()), evaluating the
-// cost itself at the parameters it is given. Slower than solveGroup's per-pixel blocks; for
+// cost itself at the parameters it is given, without a loss. Slower than solveGroup's tiles; for
 // ceres::GradientChecker and tests. `cost` must outlive the function.
 std::unique_ptr<ceres::CostFunction> makeGroupCostFunction(GroupCost& cost);
 
