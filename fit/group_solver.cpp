@@ -246,7 +246,11 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   ceres::Solver::Options so;
   so.minimizer_type = ceres::TRUST_REGION;
   so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
-  so.linear_solver_type = ceres::DENSE_QR;
+  // The normal equations JᵀJ by Cholesky rather than J by QR: Ceres's linear algebra runs on one
+  // thread, and most frames of a capture are one group (fit_capture.cpp), so it was the serial part
+  // of a fit. The Heliar 640×427 capture fitted in 79 s instead of 109 s (two quiet runs each),
+  // with recall, precision, PSNR and centroid error within what λ ± 1 % alone moves them.
+  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   so.max_num_iterations = options.max_iterations;
   so.function_tolerance = options.function_tolerance;
   so.parameter_tolerance = options.parameter_tolerance;

@@ -7,7 +7,7 @@
 //    them (shared/FITTING_NOTES.md; GroupCost::robustSample weights each pixel as Ceres's own loss
 //    would, so the steps are those of one block per pixel without Ceres's bookkeeping per block),
 //    analytic Jacobians from model/'s derivative images (the edge part is E applied to them), a
-//    dense QR solve. The model is rendered and every tile's rows filled once per evaluation point
+//    dense Cholesky solve of the normal equations. The model is rendered and every tile's rows filled once per evaluation point
 //    through a ceres::EvaluationCallback, on every thread (TBB), each pixel into its own rows;
 //    Ceres itself runs on one thread: it sums its blocks' costs per thread, so with more threads
 //    the cost's rounding, the steps it accepts and so the whole capture's fit depended on the
