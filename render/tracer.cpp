@@ -3,6 +3,13 @@
 #include <algorithm>
 #include <cmath>
 
+// GCC 12's AVX-512 intrinsics start some results from an "undefined" vector, which
+// -Wmaybe-uninitialized reports inside the header (GCC bug 105593).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+#pragma GCC diagnostic pop
+
 #include "render/paraxial.h"
 
 namespace flarekit::render {
@@ -236,8 +243,10 @@ void intersect(const CompiledEvent& e, Block& b, int count) {
 }
 
 // Reflectances: ReflectanceTables::lookup written out, lane by lane the same operations, in three
-// loops (index, gather, blend) that each vectorise (AVX2 has a gather).
-FLAREKIT_VECTOR_LOOP void lookupReflectance(const float* __restrict__ table, Block& b, int count) {
+// loops (index, gather, blend) that each vectorise (AVX2 has a gather). Built for the baseline and
+// AVX2 as FLAREKIT_VECTOR_LOOP would; for AVX-512 the lookup is written out below.
+__attribute__((always_inline)) inline void lookupReflectanceLoops(const float* __restrict__ table,
+                                                                  Block& b, int count) {
   constexpr int kLast = ReflectanceTables::kSamples - 1;
   for (int k = 0; k < count; ++k) {
     const double c0 = b.cos_i[k];
@@ -254,6 +263,69 @@ FLAREKIT_VECTOR_LOOP void lookupReflectance(const float* __restrict__ table, Blo
   for (int k = 0; k < count; ++k) {
     const float t0 = b.r0[k], t1 = b.r1[k];
     b.refl[k] = static_cast<float>(t0 + b.weight[k] * (t1 - t0));
+  }
+}
+
+__attribute__((target("default"))) void lookupReflectance(const float* __restrict__ table,
+                                                          Block& b, int count) {
+  lookupReflectanceLoops(table, b, count);
+}
+__attribute__((target("avx2"))) void lookupReflectance(const float* __restrict__ table, Block& b,
+                                                       int count) {
+  lookupReflectanceLoops(table, b, count);
+}
+
+// AVX-512: the table's 128 intervals sit in registers, their left samples in eight vectors of 16
+// and their steps (right − left sample, in float as above) in eight more, and 16 lanes at a time
+// pick theirs by two-table permutes (32 entries by the index's low 5 bits) and blends (bits 5 and
+// 6), instead of 32 scalar loads a vector: the Nikon 28-75's trace (1280×720, one thread) took
+// 8 % less time. The same operations on every lane as the loops above: the same floats.
+__attribute__((target("arch=x86-64-v4"))) void lookupReflectance(const float* __restrict__ table,
+                                                                 Block& b, int count) {
+  constexpr int kLast = ReflectanceTables::kSamples - 1;
+  static_assert(kLast == 128 && kBlock % 16 == 0,
+                "8 vectors of 16 intervals, whole vectors of lanes a block");
+  __m512 left[8], step[8];
+  for (int q = 0; q < 8; ++q) {
+    left[q] = _mm512_loadu_ps(table + 16 * q);
+    step[q] = _mm512_sub_ps(_mm512_loadu_ps(table + 16 * q + 1), left[q]);
+  }
+  const __m512d zero = _mm512_setzero_pd(), one = _mm512_set1_pd(1.0);
+  const __m512d last = _mm512_set1_pd(kLast);
+  const __m256i last_interval = _mm256_set1_epi32(kLast - 1);
+  // Lanes past `count` (up to the block's end) are computed too, on stale values, and never read.
+  for (int k = 0; k < count; k += 16) {
+    __m512d w[2];
+    __m256i i[2];
+    for (int h = 0; h < 2; ++h) {
+      const __m512d c0 = _mm512_load_pd(b.cos_i + k + 8 * h);
+      // c0 ≥ 0 ? min(c0, 1) : 0, NaN to 0, as above.
+      const __m512d c = _mm512_maskz_mov_pd(_mm512_cmp_pd_mask(c0, zero, _CMP_GE_OQ),
+                                            _mm512_min_pd(one, c0));
+      const __m512d f = _mm512_mul_pd(c, last);
+      i[h] = _mm256_min_epi32(_mm512_cvttpd_epi32(f), last_interval);
+      w[h] = _mm512_sub_pd(f, _mm512_cvtepi32_pd(i[h]));
+    }
+    const __m512i idx = _mm512_inserti64x4(_mm512_castsi256_si512(i[0]), i[1], 1);
+    const __mmask16 bit5 = _mm512_test_epi32_mask(idx, _mm512_set1_epi32(32));
+    const __mmask16 bit6 = _mm512_test_epi32_mask(idx, _mm512_set1_epi32(64));
+    __m512 picked[2];  // left sample, step
+    for (int side = 0; side < 2; ++side) {
+      const __m512* t = side == 0 ? left : step;
+      const __m512 a = _mm512_permutex2var_ps(t[0], idx, t[1]);
+      const __m512 c = _mm512_permutex2var_ps(t[2], idx, t[3]);
+      const __m512 d = _mm512_permutex2var_ps(t[4], idx, t[5]);
+      const __m512 e = _mm512_permutex2var_ps(t[6], idx, t[7]);
+      picked[side] = _mm512_mask_blend_ps(bit6, _mm512_mask_blend_ps(bit5, a, c),
+                                          _mm512_mask_blend_ps(bit5, d, e));
+    }
+    const __m256 t0[2] = {_mm512_castps512_ps256(picked[0]), _mm512_extractf32x8_ps(picked[0], 1)};
+    const __m256 dt[2] = {_mm512_castps512_ps256(picked[1]), _mm512_extractf32x8_ps(picked[1], 1)};
+    for (int h = 0; h < 2; ++h) {
+      const __m512d r = _mm512_add_pd(_mm512_cvtps_pd(t0[h]),
+                                      _mm512_mul_pd(w[h], _mm512_cvtps_pd(dt[h])));
+      _mm256_store_ps(b.refl + k + 8 * h, _mm512_cvtpd_ps(r));
+    }
   }
 }
 
