@@ -88,11 +88,12 @@ namespace {
 // both sides of each case and selects (the same IEEE operations as a scalar case analysis, so a
 // ray's result does not depend on its block), and every lane goes on computing after its ray
 // died (alive = 0): the state of dead rays is meaningless and never read. The one gather, the
-// reflectance lookup, has its own scalar loop between the vector loops. 128 rays a block (the
-// block's arrays, 26 KB, still in L1): the calls and loop set-ups of an event are spread over
-// twice the rays of 64, which traced the Nikon 28-75 (1280×720) 3 % and the Heliar 2.5 % slower
-// on one thread, whose blocks, with the blocked rays dropped at the stop, run part empty.
-constexpr int kBlock = 128;
+// reflectance lookup, has its own loops between the vector loops. 256 rays a block (the arrays an
+// event touches, about 35 KB, still in the EPYC's 48 KB L1): the calls and loop set-ups of an
+// event are spread over more rays; 64 traced the Nikon 28-75 (1280×720) 3 % and the Heliar 2.5 %
+// slower than 128 on one thread, whose blocks, with the blocked rays dropped at the stop, run
+// part empty, and 128 traced the Nikon 2.6 % slower than 256 (medians of 5 runs, 495 and 482 ms).
+constexpr int kBlock = 256;
 
 // Slope β of the validity margins folded into r_rel (total internal reflection, missed spheres).
 constexpr double kValidityScale = 4.0;
