@@ -135,6 +135,42 @@ TEST(Tracer, FastGridTracesGiveEachPassingRayThePlainResult) {
   }
 }
 
+// The tracer's reflectance lookup (written out per instruction set, render/tracer.cpp) gives
+// ReflectanceTables::lookup's value on every lane. Rays parallel to the axis meet a sphere of
+// radius 50 mm at cos θ = √(R² − y²)/R, through every interval of a table that changes sharply
+// from sample to sample (so a wrong interval shows), across three blocks of rays; the refraction
+// (η = 1) leaves them undeviated with transmission 1 − R(cos θ).
+TEST(Tracer, ReflectancesFollowTheTableOnEveryLane) {
+  std::vector<float> table(ReflectanceTables::kSamples);
+  for (size_t k = 0; k < table.size(); ++k) table[k] = 0.05f * static_cast<float>(k % 7) + 0.01f;
+  CompiledPath path;
+  CompiledEvent sphere;
+  sphere.radius = 50.0;
+  sphere.inv_radius = 1.0 / sphere.radius;
+  sphere.inv_semi = 1.0 / 60.0;
+  sphere.kind = EventKind::kRefract;
+  sphere.eta = 1.0;
+  sphere.reflectance = table.data();
+  path.events = {sphere};
+  path.z_sensor = 10.0;
+  constexpr int kRays = 300;
+  std::vector<double> x(kRays, 0.0), y(kRays);
+  std::vector<double> cos_incidence(kRays);
+  for (int k = 0; k < kRays; ++k) {
+    cos_incidence[k] = (k + 1.0) / kRays;
+    y[k] = sphere.radius * std::sqrt(1.0 - cos_incidence[k] * cos_incidence[k]);
+  }
+  TracedRays rays;
+  rays.resize(kRays);
+  traceRays(path, {0.0, 0.0, 1.0}, x.data(), y.data(), kRays, &rays);
+  for (int k = 0; k < kRays; ++k) {
+    ASSERT_TRUE(rays.alive[k]) << k;
+    EXPECT_NEAR(rays.transmission[k],
+                1.0f - ReflectanceTables::lookup(table.data(), cos_incidence[k]), 1e-6)
+        << "cos θ " << cos_incidence[k];
+  }
+}
+
 // findStopRay finds the ray through a requested point of the stop (aperture coordinates, the
 // stop's semi-aperture = 1), at an angle and for ghost paths too, starting from the centre's ray
 // as the paraxial tests do. The Heliar's ghost of surfaces 3 and 0 has live rays only on a small
