@@ -113,8 +113,12 @@ TEST(Tracer, FastGridTracesGiveEachPassingRayThePlainResult) {
       traceGrid(path, setup.direction, grid, &plain);
       traceGrid(path, setup.direction, grid, &fast, /*passing_only=*/true);
       for (size_t k = 0; k < plain.alive.size(); ++k) {
-        if (plain.passes(k)) ASSERT_TRUE(sameRay(plain, k, fast, k)) << name << " ghost " << g << " ray " << k;
-        if (!fast.alive[k]) ASSERT_FALSE(plain.passes(k)) << name << " ghost " << g << " ray " << k;
+        if (plain.passes(k)) {
+          ASSERT_TRUE(sameRay(plain, k, fast, k)) << name << " ghost " << g << " ray " << k;
+        }
+        if (!fast.alive[k]) {
+          ASSERT_FALSE(plain.passes(k)) << name << " ghost " << g << " ray " << k;
+        }
       }
       // Three grids traced together: each ray as traced alone.
       std::vector<RayGrid> grids = {grid, grid, grid};
