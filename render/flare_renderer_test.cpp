@@ -182,6 +182,49 @@ TEST(FlareRenderer, ReusedRendererAndImageGiveFreshRenders) {
   EXPECT_EQ(cv::norm(frame.radiance, renderFlare(lens, {5, 0}, o).radiance, cv::NORM_INF), 0.0);
 }
 
+// A reused renderer keeps the lens's setup (coatings, wavelengths, reflectance tables) from frame
+// to frame; every change of the lens or of an option that setup depends on gives the fresh render.
+TEST(FlareRenderer, ReusedRendererFollowsEveryChangeOfTheLensAndItsOptions) {
+  const Lens heliar = lensNamed("heliar_tronnier.json");
+  Lens thicker = heliar;
+  thicker.surfaces[1].thickness_mm += 0.5;
+  FlareRenderOptions base = small();
+  base.method = RenderMethod::kTiled;
+  base.max_ghosts = 6;
+  struct Change {
+    const char* what;
+    const Lens* lens;
+    FlareRenderOptions options;
+  };
+  std::vector<Change> changes;
+  auto with = [&](const char* what, auto set, const Lens* lens = nullptr) {
+    FlareRenderOptions o = base;
+    set(o);
+    changes.push_back({what, lens ? lens : &heliar, o});
+  };
+  with("nothing", [](FlareRenderOptions&) {});
+  with("f-number", [](FlareRenderOptions& o) { o.f_number = 8; });
+  with("focus at infinity", [](FlareRenderOptions& o) { o.focus_at_infinity = true; });
+  with("wavelengths", [](FlareRenderOptions& o) { o.spectral_samples = 5; });
+  with("coating index", [](FlareRenderOptions& o) { o.coating_ior = 1.45; });
+  with("default coating", [](FlareRenderOptions& o) { o.default_coating_nm = 450; });
+  with("coating override", [](FlareRenderOptions& o) { o.coating_override_nm = 700; });
+  with("uncoated", [](FlareRenderOptions& o) { o.uncoated = true; });
+  with("lens", [](FlareRenderOptions&) {}, &thicker);
+  FlareRenderer renderer;
+  FlareImage frame;
+  cv::Mat previous;
+  for (const Change& c : changes) {
+    renderer.render(*c.lens, {6, 0}, c.options, &frame);
+    const FlareImage fresh = renderFlare(*c.lens, {6, 0}, c.options);
+    EXPECT_EQ(cv::norm(frame.radiance, fresh.radiance, cv::NORM_INF), 0.0) << c.what;
+    if (!previous.empty() && std::string(c.what) != "nothing") {
+      EXPECT_GT(cv::norm(frame.radiance, previous, cv::NORM_INF), 0.0) << c.what << " changed nothing";
+    }
+    previous = fresh.radiance.clone();
+  }
+}
+
 TEST(FlareRenderer, CullingOptionsReduceTheGhostList) {
   const Lens lens = lensNamed("heliar_tronnier.json");
   FlareRenderOptions o = small();

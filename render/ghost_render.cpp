@@ -130,22 +130,37 @@ std::vector<SurfaceCoating> surfaceCoatings(const Lens& lens, const FlareRenderO
   return out;
 }
 
+bool sameLensOptions(const FlareRenderOptions& a, const FlareRenderOptions& b) {
+  // What prepareRender reads below before the light, and surfaceCoatings.
+  return a.focus_at_infinity == b.focus_at_infinity && a.f_number == b.f_number &&
+         a.spectral_samples == b.spectral_samples && a.coating_ior == b.coating_ior &&
+         a.default_coating_nm == b.default_coating_nm &&
+         a.coating_override_nm == b.coating_override_nm && a.uncoated == b.uncoated;
+}
+
 RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
-                          const FlareRenderOptions& options) {
+                          const FlareRenderOptions& options, const RenderSetup* same_lens) {
   std::string error;
   if (!options.IsValid(&error)) throw InputError("render options: " + error);
   RenderSetup s;
-  s.lens = options.focus_at_infinity ? focusAtInfinity(lens) : lens;
-  if (options.f_number > 0) s.lens = stopDown(s.lens, options.f_number);
-  s.coatings = surfaceCoatings(s.lens, options);
-  s.samples = spectralSamples(options.spectral_samples);
-  // The wavelengths' reflectance tables in parallel: thin-film reflectances of every surface at
-  // 129 angles each, most of this function's 0.27 ms (Heliar, one thread), which the matrix
-  // renderer waited for on one core.
-  s.tables.resize(s.samples.size());
-  tbb::parallel_for(size_t{0}, s.samples.size(), [&](size_t i) {
-    s.tables[i] = ReflectanceTables(s.lens, s.coatings, s.samples[i].wavelength_nm);
-  });
+  if (same_lens) {
+    s.lens = same_lens->lens;
+    s.coatings = same_lens->coatings;
+    s.samples = same_lens->samples;
+    s.tables = same_lens->tables;
+  } else {
+    s.lens = options.focus_at_infinity ? focusAtInfinity(lens) : lens;
+    if (options.f_number > 0) s.lens = stopDown(s.lens, options.f_number);
+    s.coatings = surfaceCoatings(s.lens, options);
+    s.samples = spectralSamples(options.spectral_samples);
+    // The wavelengths' reflectance tables in parallel: thin-film reflectances of every surface at
+    // 129 angles each, most of this function's 0.27 ms (Heliar, one thread), which the matrix
+    // renderer waited for on one core.
+    s.tables.resize(s.samples.size());
+    tbb::parallel_for(size_t{0}, s.samples.size(), [&](size_t i) {
+      s.tables[i] = ReflectanceTables(s.lens, s.coatings, s.samples[i].wavelength_nm);
+    });
+  }
   s.mapping.width_px = options.width_px;
   s.mapping.height_px = options.height_px;
   s.mapping.pixel_pitch_mm = std::min(options.sensor_width_mm / options.width_px,

@@ -31,9 +31,15 @@ struct RenderSetup {
 };
 
 // Applies the options to a copy of the lens (f-number, focus) and precomputes the rest.
-// Throws InputError for invalid options.
+// Throws InputError for invalid options. `same_lens`: a setup prepared before from the same lens
+// with the same lens options (sameLensOptions), whose lens, coatings, wavelengths and reflectance
+// tables are taken over rather than computed again, as for the frames of one sequence (the tables
+// were a tenth of a Heliar matrix frame).
 RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
-                          const FlareRenderOptions& options);
+                          const FlareRenderOptions& options, const RenderSetup* same_lens = nullptr);
+// Whether prepareRender makes the same lens, coatings, wavelengths and reflectance tables from
+// both option sets (for one lens): every option those depend on is the same.
+bool sameLensOptions(const FlareRenderOptions& a, const FlareRenderOptions& b);
 
 // Coatings as FlareRenderOptions describes them.
 std::vector<SurfaceCoating> surfaceCoatings(const Lens& lens, const FlareRenderOptions& options);

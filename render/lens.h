@@ -26,6 +26,8 @@ inline constexpr double kWavelengthD_nm = 587.56;
 struct SellmeierCoefficients {
   std::array<double, 3> b{};      // dimensionless
   std::array<double, 3> c_um2{};  // µm²
+
+  bool operator==(const SellmeierCoefficients&) const = default;
 };
 
 struct Surface {
@@ -39,6 +41,7 @@ struct Surface {
   bool is_stop = false;            // the aperture stop (iris)
 
   bool isFlat() const { return radius_mm == 0.0; }
+  bool operator==(const Surface&) const = default;
 };
 
 // What the lens file itself states about the lens, kept for checks and reports (all optional).
@@ -50,6 +53,8 @@ struct LensFileFacts {
   std::optional<double> paraxial_f_number;         // "paraxial_f_number_at_stop_semi_aperture_computed"
   std::optional<int> ghosts_all;                   // "two_reflection_ghosts_computed.all_surface_pairs"
   std::optional<int> ghosts_same_side;             // "...both_reflections_on_same_side_of_stop"
+
+  bool operator==(const LensFileFacts&) const = default;
 };
 
 struct Lens {
@@ -77,6 +82,8 @@ struct Lens {
   double refractiveIndex(int i, double wavelength_nm) const;
   // Stop semi-aperture (the iris opening) in mm.
   double stopSemiAperture_mm() const;
+  // Every field the same (name and notes too).
+  bool operator==(const Lens&) const = default;
 };
 
 // Loads a lens: ".json" in the schema of lenses/README.md, ".dat" as a pbrt realistic-camera file.
