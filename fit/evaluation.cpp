@@ -215,6 +215,19 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
           errors.push_back(e);
         } else {
           fe.missed_true_ids.push_back(true_blobs[t].id);
+          FrameEvaluation::Missed miss;
+          miss.id = true_blobs[t].id;
+          miss.centroid = true_blobs[t].centroid;
+          miss.radius_px = true_blobs[t].radius;
+          miss.peak_sigma = fe.noise_sigma > 0 ? true_blobs[t].peak / fe.noise_sigma : kNaN;
+          miss.nearest_distance_px = kNaN;
+          for (const Blob& b : model_blobs)
+            if (const double d = cv::norm(b.centroid - miss.centroid);
+                miss.nearest_model_id < 0 || d < miss.nearest_distance_px) {
+              miss.nearest_model_id = b.id;
+              miss.nearest_distance_px = d;
+            }
+          fe.missed.push_back(miss);
         }
       }
       for (size_t k = 0; k < model_blobs.size(); ++k) {
@@ -241,6 +254,18 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
 
 namespace {
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+
+nlohmann::json missed(const FrameEvaluation& f) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& m : f.missed)
+    a.push_back({{"id", m.id},
+                 {"centroid_px", {m.centroid.x, m.centroid.y}},
+                 {"radius_px", m.radius_px},
+                 {"peak_sigma", number(m.peak_sigma)},
+                 {"nearest_model_id", m.nearest_model_id},
+                 {"nearest_distance_px", number(m.nearest_distance_px)}});
+  return a;
+}
 }  // namespace
 
 nlohmann::json Evaluation::toJson() const {
@@ -268,6 +293,7 @@ nlohmann::json Evaluation::toJson() const {
                   {"model_ghosts_matched", f.model_ghosts_matched},
                   {"median_centroid_error_px", number(medianOf(f.centroid_errors_px))},
                   {"missed_true_ids", f.missed_true_ids},
+                  {"missed", missed(f)},
                   {"unmatched_model_ids", f.unmatched_model_ids}});
   }
   j["frames"] = fs;

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <nlohmann/json_fwd.hpp>
+#include <opencv2/core.hpp>
 
 #include "fit/frames.h"
 #include "model/flare_model.h"
@@ -50,6 +51,17 @@ struct FrameEvaluation {
   int model_ghosts_matched = 0;    // matched to some true ghost
   std::vector<double> centroid_errors_px;  // per matched visible pair
   std::vector<int> missed_true_ids;        // visible true ghosts without a match
+  // Each missed visible true ghost: where it is, and the nearest model ghost (why it is missed:
+  // none near it, or one beyond the gate).
+  struct Missed {
+    int id = 0;
+    cv::Point2d centroid;             // image pixels
+    double radius_px = 0;             // as the gate uses it
+    double peak_sigma = 0;            // its peak in noise σ
+    int nearest_model_id = -1;        // −1: no model ghost in the frame
+    double nearest_distance_px = 0;   // centroid distance to it
+  };
+  std::vector<Missed> missed;
   std::vector<int> unmatched_model_ids;    // model ghosts without a true ghost
 };
 

@@ -4,6 +4,7 @@
 #include "fit/evaluation.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "common/exr.h"
 #include "common/testing.h"
@@ -83,6 +84,24 @@ TEST(EvaluateModel, MatchGateFollowsTheGhostsSizeNotACausticsSpike) {
   EXPECT_GT(ev.median_centroid_error_px, 3);
   EXPECT_LT(ev.median_centroid_error_px, 12.5);
   EXPECT_DOUBLE_EQ(ev.precision, 1);
+}
+
+TEST(EvaluateModel, AMissedGhostSaysWhereItIsAndHowFarTheNearestModelGhostIs) {
+  TempDir dir;
+  const cv::Mat ghost = render(disc(60, 65, 20, 1e-3));
+  // The model's disc 40 px to the right: beyond the gate of max(3, 20 / 4) px.
+  const auto ev = evaluateModel(modelOf(disc(100, 65, 20, 1e-3)), stackOf(dir, ghost, ghost, ghost));
+  ASSERT_EQ(ev.frames.size(), 1u);
+  EXPECT_EQ(ev.true_ghosts_found, 0);
+  ASSERT_EQ(ev.frames[0].missed.size(), 1u);
+  const auto& miss = ev.frames[0].missed[0];
+  EXPECT_EQ(miss.id, 0);
+  EXPECT_NEAR(miss.centroid.x, 60, 0.5);
+  EXPECT_NEAR(miss.centroid.y, 65, 0.5);
+  EXPECT_NEAR(miss.radius_px, 20, 1.5);
+  EXPECT_EQ(miss.nearest_model_id, 0);
+  EXPECT_NEAR(miss.nearest_distance_px, 40, 0.5);
+  EXPECT_EQ(ev.toJson()["frames"][0]["missed"][0]["nearest_model_id"], 0);
 }
 
 TEST(EvaluateModel, NoiseFloorIsTheBackgroundsNotTheLightsShotNoise) {
