@@ -68,7 +68,7 @@ void registerFit(CLI::App& app) {
     std::string out, optimizer = "ceres", degree = "2", holdout, report;
     int threads = 2;
     double edge_weight = -1, shape_prior = -1;
-    bool light_symmetry = true, veils = false;
+    bool light_symmetry = true, veils = false, glare = true;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -90,6 +90,9 @@ void registerFit(CLI::App& app) {
   cmd->add_flag("--veils", o->veils,
                 "Also seed veils that fill the frame from steps of the residual along the flare axis "
                 "(off by default: more ghosts found, a less stable physics ranking; fit/detection.h)");
+  cmd->add_flag("--glare,!--no-glare", o->glare,
+                "Seed veiling glare, the smooth glow many faint veils sum to, as a ghost of its own with a "
+                "long fall-off (default), so the ghosts keep sharp outlines (fit/cost.h isGlare)");
   addStackOptions(cmd, o->stack);
   cmd->callback([o] {
     fit::FitOptions options;
@@ -112,6 +115,7 @@ void registerFit(CLI::App& app) {
     if (o->shape_prior >= 0) options.cost.prior_fraction = o->shape_prior;
     options.detection.light_symmetry = o->light_symmetry;
     options.detection.find_veils = o->veils;
+    options.detection.find_glare = o->glare;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
     checkWritable(o->out);  // before minutes of fitting, not after

@@ -140,7 +140,14 @@ const FrameData& FramePyramid::level(int factor) const {
 
 // ── Bounds ────────────────────────────────────────────────────────────────────────────────────
 
-model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double intensity_limit) {
+bool isGlare(const model::GhostParameters& ghost, cv::Size size) {
+  // Twice the sharp bound: a sharp ghost's Fo extrapolated a little beyond its bound by a track
+  // does not turn it into glare.
+  return ghost.outside_falloff > 2 * kSharpOutsideFalloffFraction * std::hypot(size.width, size.height);
+}
+
+model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double intensity_limit,
+                                 bool glare) {
   using namespace model::param;
   const model::ParameterLayout layout{channels};
   model::ParameterBounds b = model::parameterBounds(index, channels);
@@ -153,7 +160,8 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   else if (index == kMy) clamp(-size.height, 2.0 * size.height);
   else if (index == kL || index == kR || index == kH) clamp(0.5, diag);
   else if (index >= layout.ib(0) && index < layout.fi()) clamp(0, intensity_limit);
-  else if (index == layout.fi() || index == layout.fo()) clamp(0.3, diag);
+  else if (index == layout.fi()) clamp(0.3, diag);
+  else if (index == layout.fo()) clamp(0.3, glare ? diag : kSharpOutsideFalloffFraction * diag);
   return b;
 }
 

@@ -29,6 +29,7 @@ bool DetectionOptions::IsValid(std::string* error) const {
   if (max_new_per_frame < 1) return fail("max_new_per_frame must be ≥ 1");
   if (veil_band_px < 0 || veil_window_px < 1) return fail("veil_band_px must be ≥ 0, veil_window_px ≥ 1");
   if (!(veil_step_sigma > 0)) return fail("veil_step_sigma must be > 0");
+  if (!(glare_sigma > 0)) return fail("glare_sigma must be > 0");
   return true;
 }
 
@@ -349,6 +350,38 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
   if (static_cast<int>(found.size()) > options.max_new_per_frame)
     found.resize(options.max_new_per_frame);
   return found;
+}
+
+std::optional<Detection> detectGlare(const cv::Mat& residual, const cv::Mat& valid, double noise_sigma,
+                                     const LightImage& light, const DetectionOptions& options) {
+  if (!(noise_sigma > 0)) return std::nullopt;
+  cv::Mat mask = valid.clone();
+  if (light.found)
+    cv::circle(mask, cv::Point(cvRound(light.center.x), cvRound(light.center.y)),
+               cvCeil(light.core_radius_px * options.core_margin), cv::Scalar(0), cv::FILLED);
+  std::vector<float> values;
+  for (int y = 0; y < residual.rows; ++y)
+    for (int x = 0; x < residual.cols; ++x)
+      if (mask.at<uchar>(y, x) && std::isfinite(residual.at<float>(y, x))) values.push_back(residual.at<float>(y, x));
+  if (values.empty()) return std::nullopt;
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  const double median = values[values.size() / 2];
+  if (!(median > options.glare_sigma * noise_sigma)) return std::nullopt;
+  Detection det;
+  det.level_sigma = options.glare_sigma;
+  det.peak = median;
+  const double half_diagonal = 0.5 * std::hypot(residual.cols, residual.rows);
+  const cv::Point2d center(residual.cols / 2.0, residual.rows / 2.0);
+  model::GhostParameters& g = det.seed;
+  g.channels = 1;
+  g.center_x = center.x;
+  g.center_y = center.y;  // the axis runs through the image centre
+  g.left = g.right = g.height = half_diagonal;
+  finishSeed(median, median, &g);
+  g.outside_falloff = half_diagonal;
+  det.blob = cv::Rect(0, 0, residual.cols, residual.rows);
+  det.mask = mask;
+  return det;
 }
 
 std::vector<Detection> detectVeilEdges(const cv::Mat& residual, const cv::Mat& valid,

@@ -9,6 +9,7 @@
 // connected blob whose centre lies near the axis into a seed: centre from the blob's centroid on
 // the axis, L, R, h from its box, Ib and Ii from its values, an ellipse (Cl = Cr = 0.5523).
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -66,6 +67,10 @@ struct DetectionOptions {
   // (All measured with the fitter of commit fedfafa. The nearest-point search's convexity bound
   // since then moved every fit, as any change the size of rounding does; not measured again.)
   bool find_veils = false;
+  // Seed veiling glare (detectGlare; fit/cost.h isGlare) where the residual's median over the frame
+  // is above glare_sigma noise σ and no glare is modelled yet.
+  bool find_glare = true;
+  double glare_sigma = 2;
   // The search: the residual is averaged over a band of 2 veil_band_px + 1 pixels across the
   // flare axis, a step is the difference of the means over veil_window_px on either side of a
   // point, and steps of at least veil_step_sigma noise σ seed a veil.
@@ -134,6 +139,13 @@ struct Detection {
 std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& valid,
                                     double noise_sigma, const LightImage& light,
                                     const DetectionOptions& options);
+
+// Veiling glare (fit/cost.h isGlare): when the median of `residual` over the valid pixels away from
+// the light's clipped core is above glare_sigma × `noise_sigma`, a seed that covers the frame,
+// centred on the flare axis at the image centre, with half-sizes and an outside fall-off of half
+// the diagonal and Ib = Ii = that median; its blob is those pixels. Nothing otherwise.
+std::optional<Detection> detectGlare(const cv::Mat& residual, const cv::Mat& valid, double noise_sigma,
+                                     const LightImage& light, const DetectionOptions& options);
 
 // Veils whose outline crosses the frame but whose body fills it: on the 640×427 captures the
 // detection's largest misses (Heliar Tronnier ghosts 19 and 2, Brendel Tessar 2 and 4, between

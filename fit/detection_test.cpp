@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include "fit/cost.h"
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {
@@ -70,6 +71,23 @@ TEST(DetectVeilEdges, IgnoresGhostsInsideTheFrameNoiseAndFaintSteps) {
   EXPECT_TRUE(detectVeilEdges(noisy({disc(160, 107, 60, 30 * sigma)}, size, sigma), valid, sigma, kNoLight, options).empty());
   EXPECT_TRUE(detectVeilEdges(noisy({}, size, sigma), valid, sigma, kNoLight, options).empty());
   EXPECT_TRUE(detectVeilEdges(noisy({disc(-150, 107, 330, 3 * sigma)}, size, sigma), valid, sigma, kNoLight, options).empty());
+}
+
+// Many veils, each too faint to see, sum to a pedestal over the frame: one glare seed (a ghost
+// with a long outside fall-off, fit/cost.h isGlare) at its level. Noise alone, or a bright ghost
+// inside the frame on a dark background, gives none.
+TEST(DetectGlare, SeedsGlareOnAPedestalAndNothingOnNoiseOrAGhost) {
+  const cv::Size size(320, 214);
+  const double sigma = 1e-3;
+  const cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  const DetectionOptions options;
+  const auto glare = detectGlare(noisy({disc(-400, 107, 700, 4 * sigma)}, size, sigma), valid, sigma, kNoLight, options);
+  ASSERT_TRUE(glare.has_value());
+  EXPECT_TRUE(isGlare(glare->seed, size));
+  EXPECT_NEAR(glare->seed.border[0], 4 * sigma, 0.5 * sigma);
+  EXPECT_NEAR(glare->seed.center_y, 107, 1);
+  EXPECT_FALSE(detectGlare(noisy({}, size, sigma), valid, sigma, kNoLight, options).has_value());
+  EXPECT_FALSE(detectGlare(noisy({disc(160, 107, 60, 30 * sigma)}, size, sigma), valid, sigma, kNoLight, options).has_value());
 }
 
 }  // namespace

@@ -380,7 +380,11 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
     g.angle_max_deg = std::min(capture_max_deg, std::max(t.angles_deg.back(), t.angles_deg.back() + range_margin_deg));
     const int count = model::parameterCount(channels);
     const model::ParameterLayout layout{channels};
-    std::vector<bool> intensity_inliers(t.fits.size(), true);  // for Ib and Ii of every channel
+    // Frames where no parameter is a spike: only there can the model's ghost be compared with the
+    // fit in image space (fitIntensitiesInImage). With the intensities' spikes alone left out, a
+    // frame fitted with half its outline hidden in the light's core (L 3 px instead of 14) set the
+    // model's Ib at the track's end to 0.45 where every fit had 0.8.
+    std::vector<bool> image_inliers(t.fits.size(), true);
     int intensity_degree = 0;
     for (int k = 0; k < count; ++k) {
       std::vector<double> all;
@@ -414,12 +418,10 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
         p.coefficients = {std::clamp(medianOf(v), lo, hi)};
       }
       g.parameters.push_back(p);
-      if (k >= layout.ib(0) && k < layout.fi()) {
-        for (size_t i = 0; i < inlier.size(); ++i) intensity_inliers[i] = intensity_inliers[i] && inlier[i];
-        intensity_degree = std::max(intensity_degree, d);
-      }
+      if (k >= layout.ib(0) && k < layout.fi()) intensity_degree = std::max(intensity_degree, d);
+      for (size_t i = 0; i < inlier.size(); ++i) image_inliers[i] = image_inliers[i] && inlier[i];
     }
-    fitIntensitiesInImage(t, intensity_inliers, info.image_size, channels, intensity_degree, g);
+    fitIntensitiesInImage(t, image_inliers, info.image_size, channels, intensity_degree, g);
     m.ghosts.push_back(std::move(g));
   }
   return m;
@@ -891,6 +893,11 @@ class CaptureFitter {
     if (options_.detection.find_veils)
       for (auto& veil : detectVeilEdges(residual, level.valid, level.noise_sigma, light, options_.detection))
         candidates.push_back(std::move(veil));
+    // Glare first: the sharp ghosts are then fitted on top of it, not softened to cover it.
+    if (options_.detection.find_glare &&
+        std::none_of(ghosts.begin(), ghosts.end(), [&](const GhostParameters& g) { return isGlare(g, stack_.size); }))
+      if (auto glare = detectGlare(residual, level.valid, level.noise_sigma, light, options_.detection))
+        candidates.insert(candidates.begin(), std::move(*glare));
     for (const auto& c : candidates) {
       GhostParameters grey = c.seed;
       grey.center_x *= kd;

@@ -272,6 +272,49 @@ TEST(FitCapture, RecoversMovingGhostsInMemory) {
   EXPECT_FALSE(r.summary.BriefReport().empty());
 }
 
+// A sharp ghost on a broad glow (what many veils, each too faint to see, sum to): the model holds
+// the ghost where it is with its sharp outline, and the glow apart from it as glare.
+TEST(FitCapture, HoldsASharpGhostApartFromTheGlowUnderIt) {
+  FrameStack stack = testStack();
+  cv::theRNG().state = 9;
+  model::GhostParameters glow;
+  glow.center_x = 80;
+  glow.center_y = 50;
+  glow.left = glow.right = glow.height = 40;
+  glow.border = {0.1, 0, 0};
+  glow.inside = {0.1, 0, 0};
+  glow.outside_falloff = 100;
+  for (int i = 0; i < 9; ++i) {
+    const double theta = 0.25 * i;
+    model::GhostParameters g;
+    g.center_x = 60 + 8 * theta;
+    g.center_y = 50;
+    g.left = g.right = 15;
+    g.height = 14;
+    g.border = {0.5, 0, 0};
+    g.inside = {0.3, 0, 0};
+    Frame f = oneGhostFrame(stack, i, theta, g);
+    f.image = model::renderGhosts(std::vector<model::GhostParameters>{g, glow}, stack.size, 1);
+    cv::Mat noise(stack.size, CV_32F);
+    cv::randn(noise, 0, 0.005);
+    f.image += noise;
+    stack.frames.push_back(f);
+  }
+  FitOptions options;
+  options.progress = false;
+  const FitResult r = fitCapture(stack, options);
+  int sharp = 0, glare = 0;
+  for (const auto& at : r.model.ghostsAt(1.0)) {
+    const auto& g = at.parameters;
+    if (isGlare(g, stack.size)) ++glare;
+    if (std::abs(g.center_x - 68) < 0.5 && std::abs(g.left - 15) < 1 && std::abs(g.right - 15) < 1 &&
+        g.outside_falloff < 5)
+      ++sharp;
+  }
+  EXPECT_EQ(sharp, 1) << r.summary.BriefReport();
+  EXPECT_EQ(glare, 1) << r.summary.BriefReport();
+}
+
 // Near θ = 0 a ghost is concentric with the light, and the light's point-symmetric estimate S
 // takes it with the halo: its fit sinks into the noise. The fitter carries it from the frames
 // where it stands clear of the light into the light, towards the image centre, as bright as it

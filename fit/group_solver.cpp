@@ -61,7 +61,7 @@ std::vector<std::vector<double>> clampedSeeds(const GroupCost& cost,
   for (const auto& s : seeds) {
     auto v = model::toParameterVector(model::clampToBounds(s));
     for (size_t k = 0; k < v.size(); ++k) {
-      const auto b = fitBounds(static_cast<int>(k), s.channels, size, cost.intensityLimit());
+      const auto b = fitBounds(static_cast<int>(k), s.channels, size, cost.intensityLimit(), isGlare(s, size));
       v[k] = std::clamp(v[k], b.lower, b.upper);
     }
     blocks.push_back(std::move(v));
@@ -238,7 +238,7 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
       problem.AddResidualBlock(new PriorResidual(cost, static_cast<int>(g)), nullptr, pointers[g]);
   for (size_t g = 0; g < blocks.size(); ++g)
     for (size_t k = 0; k < blocks[g].size(); ++k) {
-      const auto b = fitBounds(static_cast<int>(k), channels, size, cost.intensityLimit());
+      const auto b = fitBounds(static_cast<int>(k), channels, size, cost.intensityLimit(), isGlare(seeds[g], size));
       problem.SetParameterLowerBound(pointers[g], static_cast<int>(k), b.lower);
       if (b.upper < model::kUnbounded)
         problem.SetParameterUpperBound(pointers[g], static_cast<int>(k), b.upper);
@@ -303,7 +303,7 @@ GroupFitResult solveWalchGd(GroupCost& cost, std::span<const model::GhostParamet
     // Fixed order, shape before shade: parameter index order is shape (Mx..Cr) then intensity.
     for (size_t g = 0; g < blocks.size(); ++g) {
       for (int k = 0; k < n; ++k) {
-        const auto b = fitBounds(k, channels, size, cost.intensityLimit());
+        const auto b = fitBounds(k, channels, size, cost.intensityLimit(), isGlare(seeds[g], size));
         const double h = learning_rate * parameterStep(k, channels, cost.scale());
         const double q = blocks[g][k];
         const double plus = std::min(q + h, b.upper), minus = std::max(q - h, b.lower);
