@@ -231,14 +231,33 @@ FrameStack testStack() {
   return stack;
 }
 
-// Frame `index` of `stack` at `angle_deg`: the one ghost `g` rendered, every pixel valid.
-Frame oneGhostFrame(const FrameStack& stack, int index, double angle_deg, const model::GhostParameters& g) {
+// Frame `index` of `stack` at `angle_deg`: the ghosts rendered, every pixel valid.
+Frame ghostFrame(const FrameStack& stack, int index, double angle_deg,
+                 const std::vector<model::GhostParameters>& ghosts) {
   Frame f;
   f.index = index;
   f.angle_deg = angle_deg;
-  f.image = model::renderGhosts(std::vector<model::GhostParameters>{g}, stack.size, 1);
+  f.image = model::renderGhosts(ghosts, stack.size, 1);
   f.valid = cv::Mat(stack.size, CV_8U, cv::Scalar(255));
   return f;
+}
+
+// A disc-like ghost 15 × 14 px in half-size at (x, 50).
+model::GhostParameters ghostAt(double x, double border, double inside) {
+  model::GhostParameters g;
+  g.center_x = x;
+  g.center_y = 50;
+  g.left = g.right = 15;
+  g.height = 14;
+  g.border = {border, 0, 0};
+  g.inside = {inside, 0, 0};
+  return g;
+}
+
+void addNoise(Frame& f, double sigma) {
+  cv::Mat noise(f.image.size(), CV_32F);
+  cv::randn(noise, 0, sigma);
+  f.image += noise;
 }
 
 TEST(FitCapture, RecoversMovingGhostsInMemory) {
@@ -246,17 +265,8 @@ TEST(FitCapture, RecoversMovingGhostsInMemory) {
   cv::theRNG().state = 5;
   for (int i = 0; i < 9; ++i) {
     const double theta = 0.25 * i;
-    model::GhostParameters g;
-    g.center_x = 50 + 8 * theta;
-    g.center_y = 50;
-    g.left = g.right = 15;
-    g.height = 14;
-    g.border = {1, 0, 0};
-    g.inside = {0.4, 0, 0};
-    Frame f = oneGhostFrame(stack, i, theta, g);
-    cv::Mat noise(stack.size, CV_32F);
-    cv::randn(noise, 0, 0.01);
-    f.image += noise;
+    Frame f = ghostFrame(stack, i, theta, {ghostAt(50 + 8 * theta, 1, 0.4)});
+    addNoise(f, 0.01);
     stack.frames.push_back(f);
   }
   FitOptions options;
@@ -286,18 +296,8 @@ TEST(FitCapture, HoldsASharpGhostApartFromTheGlowUnderIt) {
   glow.outside_falloff = 100;
   for (int i = 0; i < 9; ++i) {
     const double theta = 0.25 * i;
-    model::GhostParameters g;
-    g.center_x = 60 + 8 * theta;
-    g.center_y = 50;
-    g.left = g.right = 15;
-    g.height = 14;
-    g.border = {0.5, 0, 0};
-    g.inside = {0.3, 0, 0};
-    Frame f = oneGhostFrame(stack, i, theta, g);
-    f.image = model::renderGhosts(std::vector<model::GhostParameters>{g, glow}, stack.size, 1);
-    cv::Mat noise(stack.size, CV_32F);
-    cv::randn(noise, 0, 0.005);
-    f.image += noise;
+    Frame f = ghostFrame(stack, i, theta, {ghostAt(60 + 8 * theta, 0.5, 0.3), glow});
+    addNoise(f, 0.005);
     stack.frames.push_back(f);
   }
   FitOptions options;
@@ -334,16 +334,14 @@ TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
     g.height = 13;
     g.border = {0.8, 0, 0};
     g.inside = {0.3, 0, 0};
-    Frame f = oneGhostFrame(stack, i, theta, g);
+    Frame f = ghostFrame(stack, i, theta, {g});
     for (int y = 0; y < stack.size.height; ++y)
       for (int x = 0; x < stack.size.width; ++x) {
         const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
         f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
         if (r < 3) f.valid.at<uchar>(y, x) = 0;  // the clipped core
       }
-    cv::Mat noise(stack.size, CV_32F);
-    cv::randn(noise, 0, 0.005);
-    f.image += noise;
+    addNoise(f, 0.005);
     stack.frames.push_back(f);
   }
   FitOptions options;
