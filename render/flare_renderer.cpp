@@ -122,7 +122,7 @@ struct FlareRenderer::Scratch {
   std::vector<std::vector<RasterTriangle>> batches;
   RasterScratch raster;  // the per-ghost rasterizer's buffers
   // The last render's lens, options and setup: its lens, coatings, wavelengths and reflectance
-  // tables serve the next render of the same lens with the same lens options (prepareRender).
+  // tables serve the next render of the same lens with the same lens options (prepareLensSetup).
   std::optional<Lens> lens;
   FlareRenderOptions lens_options;
   RenderSetup setup;
@@ -175,12 +175,12 @@ void FlareRenderer::render(const Lens& lens, const LightDirection& light,
   if (!std::isfinite(light.angle_deg) || !std::isfinite(light.roll_deg) ||
       std::abs(light.angle_deg) >= 89.0)
     throw InputError("light angle must be finite and below 89 degrees");
-  const bool same_lens = scratch_->lens && *scratch_->lens == lens && sameLensOptions(scratch_->lens_options, options);
-  scratch_->setup = prepareRender(lens, light, options, same_lens ? &scratch_->setup : nullptr);
-  if (!same_lens) {
+  if (!(scratch_->lens && *scratch_->lens == lens && sameLensOptions(scratch_->lens_options, options))) {
+    scratch_->setup = prepareLensSetup(lens, options);
     scratch_->lens = lens;
     scratch_->lens_options = options;
   }
+  aimSetup(scratch_->setup, light, options);
   const RenderSetup& setup = scratch_->setup;
   FlareImage& out = *image;
   // The matrix sprites and the tiled rasterizer write every pixel themselves (in parallel, in

@@ -131,36 +131,41 @@ std::vector<SurfaceCoating> surfaceCoatings(const Lens& lens, const FlareRenderO
 }
 
 bool sameLensOptions(const FlareRenderOptions& a, const FlareRenderOptions& b) {
-  // What prepareRender reads below before the light, and surfaceCoatings.
+  // What prepareLensSetup reads, and surfaceCoatings.
   return a.focus_at_infinity == b.focus_at_infinity && a.f_number == b.f_number &&
          a.spectral_samples == b.spectral_samples && a.coating_ior == b.coating_ior &&
          a.default_coating_nm == b.default_coating_nm &&
          a.coating_override_nm == b.coating_override_nm && a.uncoated == b.uncoated;
 }
 
-RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
-                          const FlareRenderOptions& options, const RenderSetup* same_lens) {
+RenderSetup prepareLensSetup(const Lens& lens, const FlareRenderOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw InputError("render options: " + error);
   RenderSetup s;
-  if (same_lens) {
-    s.lens = same_lens->lens;
-    s.coatings = same_lens->coatings;
-    s.samples = same_lens->samples;
-    s.tables = same_lens->tables;
-  } else {
-    s.lens = options.focus_at_infinity ? focusAtInfinity(lens) : lens;
-    if (options.f_number > 0) s.lens = stopDown(s.lens, options.f_number);
-    s.coatings = surfaceCoatings(s.lens, options);
-    s.samples = spectralSamples(options.spectral_samples);
-    // The wavelengths' reflectance tables in parallel: thin-film reflectances of every surface at
-    // 129 angles each, most of this function's 0.27 ms (Heliar, one thread), which the matrix
-    // renderer waited for on one core.
-    s.tables.resize(s.samples.size());
-    tbb::parallel_for(size_t{0}, s.samples.size(), [&](size_t i) {
-      s.tables[i] = ReflectanceTables(s.lens, s.coatings, s.samples[i].wavelength_nm);
-    });
-  }
+  s.lens = options.focus_at_infinity ? focusAtInfinity(lens) : lens;
+  if (options.f_number > 0) s.lens = stopDown(s.lens, options.f_number);
+  s.coatings = surfaceCoatings(s.lens, options);
+  s.samples = spectralSamples(options.spectral_samples);
+  // The wavelengths' reflectance tables in parallel: thin-film reflectances of every surface at
+  // 129 angles each, most of this function's 0.27 ms (Heliar, one thread), which the matrix
+  // renderer waited for on one core.
+  s.tables.resize(s.samples.size());
+  tbb::parallel_for(size_t{0}, s.samples.size(), [&](size_t i) {
+    s.tables[i] = ReflectanceTables(s.lens, s.coatings, s.samples[i].wavelength_nm);
+  });
+  return s;
+}
+
+RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
+                          const FlareRenderOptions& options) {
+  RenderSetup s = prepareLensSetup(lens, options);
+  aimSetup(s, light, options);
+  return s;
+}
+
+void aimSetup(RenderSetup& s, const LightDirection& light, const FlareRenderOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw InputError("render options: " + error);
   s.mapping.width_px = options.width_px;
   s.mapping.height_px = options.height_px;
   s.mapping.pixel_pitch_mm = std::min(options.sensor_width_mm / options.width_px,
@@ -176,7 +181,6 @@ RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
                                           std::sqrt(first.radius_mm * first.radius_mm - h0 * h0);
   const double tan_t = std::hypot(s.direction[0], s.direction[1]) / std::max(1e-9, s.direction[2]);
   s.search_half_mm = 1.02 * (h0 + tan_t * sag);
-  return s;
 }
 
 std::optional<RayGrid> boundGhost(const RenderSetup& setup, const CompiledPath& path) {

@@ -31,13 +31,19 @@ struct RenderSetup {
 };
 
 // Applies the options to a copy of the lens (f-number, focus) and precomputes the rest.
-// Throws InputError for invalid options. `same_lens`: a setup prepared before from the same lens
-// with the same lens options (sameLensOptions), whose lens, coatings, wavelengths and reflectance
-// tables are taken over rather than computed again, as for the frames of one sequence (the tables
-// were a tenth of a Heliar matrix frame).
+// Throws InputError for invalid options. prepareLensSetup then aimSetup.
 RenderSetup prepareRender(const Lens& lens, const LightDirection& light,
-                          const FlareRenderOptions& options, const RenderSetup* same_lens = nullptr);
-// Whether prepareRender makes the same lens, coatings, wavelengths and reflectance tables from
+                          const FlareRenderOptions& options);
+// The part of the setup that depends on the lens and the lens options only (sameLensOptions):
+// the working lens, its coatings, the wavelengths and their reflectance tables. A renderer keeps
+// it over the frames of one sequence (the tables were a tenth of a Heliar matrix frame) and only
+// aims it at each frame's light. Throws InputError for invalid options.
+RenderSetup prepareLensSetup(const Lens& lens, const FlareRenderOptions& options);
+// The rest of the setup, for one light: the image mapping, the light's direction and irradiance,
+// the aperture and the square searched for each ghost's rays. Throws InputError for invalid
+// options.
+void aimSetup(RenderSetup& setup, const LightDirection& light, const FlareRenderOptions& options);
+// Whether prepareLensSetup makes the same lens, coatings, wavelengths and reflectance tables from
 // both option sets (for one lens): every option those depend on is the same.
 bool sameLensOptions(const FlareRenderOptions& a, const FlareRenderOptions& b);
 
