@@ -60,8 +60,9 @@ std::vector<std::vector<double>> clampedSeeds(const GroupCost& cost,
   std::vector<std::vector<double>> blocks;
   for (const auto& s : seeds) {
     auto v = model::toParameterVector(model::clampToBounds(s));
+    const bool glare = isGlare(s, size);
     for (size_t k = 0; k < v.size(); ++k) {
-      const auto b = fitBounds(static_cast<int>(k), s.channels, size, cost.intensityLimit(), isGlare(s, size));
+      const auto b = fitBounds(static_cast<int>(k), s.channels, size, cost.intensityLimit(), glare);
       v[k] = std::clamp(v[k], b.lower, b.upper);
     }
     blocks.push_back(std::move(v));
@@ -236,13 +237,15 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   if (cost.priorResidualCount() > 0)
     for (size_t g = 0; g < blocks.size(); ++g)
       problem.AddResidualBlock(new PriorResidual(cost, static_cast<int>(g)), nullptr, pointers[g]);
-  for (size_t g = 0; g < blocks.size(); ++g)
+  for (size_t g = 0; g < blocks.size(); ++g) {
+    const bool glare = isGlare(seeds[g], size);
     for (size_t k = 0; k < blocks[g].size(); ++k) {
-      const auto b = fitBounds(static_cast<int>(k), channels, size, cost.intensityLimit(), isGlare(seeds[g], size));
+      const auto b = fitBounds(static_cast<int>(k), channels, size, cost.intensityLimit(), glare);
       problem.SetParameterLowerBound(pointers[g], static_cast<int>(k), b.lower);
       if (b.upper < model::kUnbounded)
         problem.SetParameterUpperBound(pointers[g], static_cast<int>(k), b.upper);
     }
+  }
   ceres::Solver::Options so;
   so.minimizer_type = ceres::TRUST_REGION;
   so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
@@ -302,8 +305,9 @@ GroupFitResult solveWalchGd(GroupCost& cost, std::span<const model::GhostParamet
     bool improved = false;
     // Fixed order, shape before shade: parameter index order is shape (Mx..Cr) then intensity.
     for (size_t g = 0; g < blocks.size(); ++g) {
+      const bool glare = isGlare(seeds[g], size);
       for (int k = 0; k < n; ++k) {
-        const auto b = fitBounds(k, channels, size, cost.intensityLimit(), isGlare(seeds[g], size));
+        const auto b = fitBounds(k, channels, size, cost.intensityLimit(), glare);
         const double h = learning_rate * parameterStep(k, channels, cost.scale());
         const double q = blocks[g][k];
         const double plus = std::min(q + h, b.upper), minus = std::max(q - h, b.lower);
