@@ -251,6 +251,26 @@ double outlineIoU(const GhostParameters& a, const GhostParameters& b) {
   return joint > 0 ? overlap / joint : 0.0;
 }
 
+// A level of k×k-pixel averages of an image of `image_size`, k the largest that leaves at least
+// about `pixels`: where the model's ghosts are compared with the fits in image space (brightness
+// and outlines, not a pixel's detail).
+struct ImageLevel {
+  ImageLevel(cv::Size image_size, double pixels) {
+    const int factor = std::max(1, static_cast<int>(std::sqrt(image_size.area() / pixels)));
+    size = cv::Size(std::max(1, image_size.width / factor), std::max(1, image_size.height / factor));
+    view.scale = 1.0 / factor;
+  }
+  cv::Size size;
+  model::ViewTransform view;
+};
+
+// The brightest value of a ghost's image on `level`.
+double renderedPeak(const GhostParameters& g, const ImageLevel& level, int channels) {
+  double peak = 0;
+  cv::minMaxLoc(model::renderGhosts(std::span(&g, 1), level.size, channels, {}, level.view).reshape(1), nullptr, &peak);
+  return peak;
+}
+
 // Refits the Ib and Ii polynomials of `g` (the other parameters' polynomials fixed) in image
 // space: the intensity transfer is linear in Ib and Ii (model/intensity.h), so the coefficients
 // that bring the model's ghost closest, in least squares over pixels, to the fit of every frame in
@@ -270,11 +290,9 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
       angles.push_back(t.angles_deg[i]);
     }
   if (frames.empty()) return false;
-  // Rendered at a level of about 40 000 pixels: brightness, not edges, is what is fitted here.
-  const int factor = std::max(1, static_cast<int>(std::sqrt(image_size.area() / 40000.0)));
-  const cv::Size size(std::max(1, image_size.width / factor), std::max(1, image_size.height / factor));
-  model::ViewTransform view;
-  view.scale = 1.0 / factor;
+  const ImageLevel level(image_size, 40000);
+  const cv::Size size = level.size;
+  const model::ViewTransform& view = level.view;
   const model::RenderOptions render;
   // Per frame: the fit's image (the target) and the unit border and inside images of the ghost
   // the other polynomials give at that angle.
@@ -367,14 +385,188 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
 
 }  // namespace
 
+// Refines every polynomial of `g` at once in image space (ours; the paper stops at polynomials
+// through each parameter, Walch et al. 2018 §3.3.3): Gauss–Newton with Marquardt's damping on the
+// coefficients, so that the model's ghost comes closest to the track's fit in every frame,
+// rendered, each frame's squared error divided by the square of its flare's peak (`frame_peaks`:
+// angle → the brightest fit of that frame), as PSNR weighs it. Polynomials through each parameter
+// on its own summarise a track whose fits trade one parameter against another from frame to frame,
+// and there they draw none of the fits: on the Heliar 640×427 capture the fits gave a median PSNR
+// against the noise-free flare of 29.3 dB and the model 24.5 dB. Its glare at 0–1.6°, whose fits
+// held Ii between 1.6e-4 and 0.33 behind inside exponents of 1 to 10, came out with Ii 0.04 and an
+// exponent of 6.8: 150× the fit's brightness at 0°.
+// The unknowns are changes of each polynomial in the centred variable, within the degree it has;
+// the Jacobian is the renderer's derivative images times powers of θ, and the normal equations are
+// built from each frame's Gram matrix of those images. A parameter whose polynomial a step takes
+// out of its bounds inside the range is held where it is from then on.
+constexpr double kRefinePixels = 20000;
+
+void refineTrackInImage(const GhostTrackFit& t, cv::Size image_size, int channels,
+                        const std::map<double, double>& frame_peaks, model::GhostTrack& g) {
+  if (t.fits.size() < 2) return;
+  const std::vector<double>& angles = t.angles_deg;
+  const ImageLevel level(image_size, kRefinePixels);
+  const cv::Size size = level.size;
+  const cv::Rect roi(0, 0, size.width, size.height);
+  const model::ViewTransform& view = level.view;
+  const model::RenderOptions render;
+  std::vector<cv::Mat> targets;
+  std::vector<double> weights;
+  for (size_t i = 0; i < t.fits.size(); ++i) {
+    targets.push_back(model::renderGhosts(std::span(&t.fits[i], 1), size, channels, render, view));
+    const double peak = frame_peaks.at(angles[i]);
+    weights.push_back(1.0 / std::max(peak * peak, 1e-30));
+  }
+  const int count = model::parameterCount(channels);
+  const CentredPolynomial basis = centredVariable(angles);
+  std::vector<int> offset(count + 1, 0);  // unknowns of parameter k: offset[k] … offset[k+1] − 1
+  for (int k = 0; k < count; ++k)
+    offset[k + 1] = offset[k] + static_cast<int>(g.parameters[k].coefficients.size());
+  const int n = offset[count];
+  // Σ_frames w ‖model − fit‖², and with `jtj`, `jtr`: JᵀJ and Jᵀr of that sum.
+  auto evaluate = [&](const model::GhostTrack& track, Eigen::MatrixXd* jtj, Eigen::VectorXd* jtr) {
+    double cost = 0;
+    if (jtj) {
+      *jtj = Eigen::MatrixXd::Zero(n, n);
+      *jtr = Eigen::VectorXd::Zero(n);
+    }
+    for (size_t f = 0; f < angles.size(); ++f) {
+      const GhostParameters q = track.at(angles[f], channels);
+      cv::Mat residual;
+      model::RenderedGhosts r;
+      if (jtj) {
+        r = model::renderGhostsWithDerivatives(std::span(&q, 1), roi, channels, render, view);
+        residual = r.image - targets[f];
+      } else {
+        residual = model::renderGhosts(std::span(&q, 1), size, channels, render, view) - targets[f];
+      }
+      cost += weights[f] * residual.dot(residual);
+      if (!jtj) continue;
+      const model::GhostDerivativeImages& d = r.derivatives[0];
+      if (d.rect.empty()) continue;
+      // The frame's Gram matrix G = Σ_x D Dᵀ and gradient Σ_x D r of the derivative images D over
+      // the pixels they reach, by one matrix product.
+      const cv::Mat res = residual(d.rect);
+      const int row_values = d.rect.width * channels;
+      Eigen::MatrixXd rows(static_cast<Eigen::Index>(d.rect.height) * row_values, count);
+      Eigen::VectorXd values(rows.rows());
+      Eigen::Index used = 0;
+      for (int y = 0; y < d.rect.height; ++y) {
+        const float* rr = res.ptr<float>(y);
+        for (int x = 0; x < row_values; ++x) {
+          bool any = false;
+          for (int k = 0; k < count; ++k) {
+            const float v = d.images[k].ptr<float>(y)[x];
+            rows(used, k) = v;
+            any = any || v != 0;
+          }
+          if (!any) continue;
+          values(used++) = rr[x];
+        }
+      }
+      const auto reached = rows.topRows(used);
+      Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(count, count);
+      gram.selfadjointView<Eigen::Lower>().rankUpdate(reached.transpose());
+      gram = gram.selfadjointView<Eigen::Lower>();
+      const Eigen::VectorXd grad = reached.transpose() * values.head(used);
+      // J columns of parameter k's coefficient j: D_k · t^j.
+      const double tt = (angles[f] - basis.t0) / basis.scale;
+      Eigen::VectorXd power(n);
+      for (int k = 0; k < count; ++k) {
+        double pw = 1;
+        for (int j = offset[k]; j < offset[k + 1]; ++j, pw *= tt) power(j) = pw;
+      }
+      for (int a = 0; a < n; ++a) {
+        const int ka = static_cast<int>(std::upper_bound(offset.begin(), offset.end(), a) - offset.begin()) - 1;
+        (*jtr)(a) += weights[f] * power(a) * grad(ka);
+        for (int b = 0; b <= a; ++b) {
+          const int kb = static_cast<int>(std::upper_bound(offset.begin(), offset.end(), b) - offset.begin()) - 1;
+          (*jtj)(a, b) += weights[f] * power(a) * power(b) * gram(ka, kb);
+        }
+      }
+    }
+    if (jtj) *jtj = jtj->selfadjointView<Eigen::Lower>();
+    return cost;
+  };
+  // The track with each polynomial changed by δ (coefficients in the centred variable); `left`
+  // marks the parameters whose polynomial the step takes out of bounds.
+  auto stepped = [&](const model::GhostTrack& from, const Eigen::VectorXd& delta, std::vector<bool>& left) {
+    model::GhostTrack to = from;
+    for (int k = 0; k < count; ++k) {
+      CentredPolynomial c = basis;
+      c.a = delta.segment(offset[k], offset[k + 1] - offset[k]);
+      const std::vector<double> change = expanded(c).coefficients;
+      for (size_t j = 0; j < change.size(); ++j) to.parameters[k].coefficients[j] += change[j];
+      left[k] = !polynomialWithinBounds(to.parameters[k], k, channels, g.angle_min_deg, g.angle_max_deg);
+    }
+    return to;
+  };
+  Eigen::MatrixXd jtj;
+  Eigen::VectorXd jtr;
+  double cost = evaluate(g, &jtj, &jtr), mu = 1e-3;
+  // Parameters held where they are: a step that took their polynomial out of bounds (a constant
+  // at a bound, a fall-off against the diagonal) is solved again without them.
+  std::vector<bool> held(count, false);
+  constexpr int kMaxIterations = 10;
+  for (int it = 0, rejected = 0; it < kMaxIterations && rejected < 8;) {
+    Eigen::MatrixXd a = jtj;
+    Eigen::VectorXd b = -jtr;
+    for (int i = 0; i < n; ++i) a(i, i) += mu * std::max(jtj(i, i), 1e-12 * jtj.diagonal().maxCoeff());
+    for (int k = 0; k < count; ++k) {
+      if (!held[k]) continue;
+      for (int i = offset[k]; i < offset[k + 1]; ++i) {
+        a.row(i).setZero();
+        a.col(i).setZero();
+        a(i, i) = 1;
+        b(i) = 0;
+      }
+    }
+    const Eigen::VectorXd delta = a.ldlt().solve(b);
+    if (!delta.allFinite()) break;
+    std::vector<bool> left(count, false);
+    model::GhostTrack trial = stepped(g, delta, left);
+    bool newly_held = false;
+    for (int k = 0; k < count; ++k)
+      if (left[k] && !held[k]) held[k] = newly_held = true;
+    if (newly_held) continue;
+    const double trial_cost = evaluate(trial, nullptr, nullptr);
+    if (trial_cost < cost) {
+      const bool converged = cost - trial_cost < 1e-4 * cost;
+      g = std::move(trial);
+      cost = evaluate(g, &jtj, &jtr);
+      mu = std::max(mu / 3, 1e-9);
+      ++it;
+      rejected = 0;
+      if (converged) break;
+    } else {
+      mu *= 4;
+      ++rejected;
+    }
+  }
+}
+
 model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, const model::CaptureInfo& info,
                                   int channels, int degree, double range_margin_deg,
-                                  double capture_min_deg, double capture_max_deg) {
+                                  double capture_min_deg, double capture_max_deg, bool refine_in_image) {
   model::FlareModel m;
   m.capture = info;
   m.channels = channels;
-  for (const auto& t : tracks) {
-    model::GhostTrack g;
+  // Each fitted frame's flare peak (its brightest fit): the refinement weighs every frame's error
+  // by it, as PSNR does.
+  std::map<double, double> frame_peaks;
+  if (refine_in_image) {
+    const ImageLevel level(info.image_size, kRefinePixels);
+    for (const auto& t : tracks)
+      for (size_t i = 0; i < t.fits.size(); ++i) {
+        double& peak = frame_peaks[t.angles_deg[i]];
+        peak = std::max(peak, renderedPeak(t.fits[i], level, channels));
+      }
+  }
+  // Each track on its own (in parallel: the refinement renders every frame of a track many times).
+  m.ghosts.resize(tracks.size());
+  tbb::parallel_for(size_t{0}, tracks.size(), [&](size_t track_index) {
+    const GhostTrackFit& t = tracks[track_index];
+    model::GhostTrack& g = m.ghosts[track_index];
     g.id = t.id;
     g.angle_min_deg = std::max(capture_min_deg, std::min(t.angles_deg.front(), t.angles_deg.front() - range_margin_deg));
     g.angle_max_deg = std::min(capture_max_deg, std::max(t.angles_deg.back(), t.angles_deg.back() + range_margin_deg));
@@ -422,8 +614,8 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
       for (size_t i = 0; i < inlier.size(); ++i) image_inliers[i] = image_inliers[i] && inlier[i];
     }
     fitIntensitiesInImage(t, image_inliers, info.image_size, channels, intensity_degree, g);
-    m.ghosts.push_back(std::move(g));
-  }
+    if (refine_in_image) refineTrackInImage(t, info.image_size, channels, frame_peaks, g);
+  });
   return m;
 }
 
@@ -1110,7 +1302,8 @@ class CaptureFitter {
     for (int pos = 1; pos < static_cast<int>(positions_.size()); ++pos) steps.push_back(angle(pos) - angle(pos - 1));
     const double margin = steps.empty() ? 0.0 : 0.5 * medianOf(steps);
     result.model = buildFlareModel(result.tracks, stack_.info, stack_.channels, degree, margin, angle(0),
-                                   angle(static_cast<int>(positions_.size()) - 1));
+                                   angle(static_cast<int>(positions_.size()) - 1),
+                                   options_.refine_in_image);
     for (const auto& [pos, fit] : frame_fits_) result.frames.push_back(fit);
     s.ghosts = static_cast<int>(result.tracks.size());
     s.detections = detections_;
