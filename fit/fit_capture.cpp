@@ -383,8 +383,6 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
   return false;
 }
 
-}  // namespace
-
 // Refines every polynomial of `g` at once in image space (ours; the paper stops at polynomials
 // through each parameter, Walch et al. 2018 §3.3.3): Gauss–Newton with Marquardt's damping on the
 // coefficients, so that the model's ghost comes closest to the track's fit in every frame,
@@ -544,6 +542,8 @@ void refineTrackInImage(const GhostTrackFit& t, cv::Size image_size, int channel
     }
   }
 }
+
+}  // namespace
 
 model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, const model::CaptureInfo& info,
                                   int channels, int degree, double range_margin_deg,
