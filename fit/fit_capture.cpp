@@ -264,13 +264,6 @@ struct ImageLevel {
   model::ViewTransform view;
 };
 
-// The brightest value of a ghost's image on `level`.
-double renderedPeak(const GhostParameters& g, const ImageLevel& level, int channels) {
-  double peak = 0;
-  cv::minMaxLoc(model::renderGhosts(std::span(&g, 1), level.size, channels, {}, level.view).reshape(1), nullptr, &peak);
-  return peak;
-}
-
 // Refits the Ib and Ii polynomials of `g` (the other parameters' polynomials fixed) in image
 // space: the intensity transfer is linear in Ib and Ii (model/intensity.h), so the coefficients
 // that bring the model's ghost closest, in least squares over pixels, to the fit of every frame in
@@ -399,20 +392,18 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
 // out of its bounds inside the range is held where it is from then on.
 constexpr double kRefinePixels = 20000;
 
-void refineTrackInImage(const GhostTrackFit& t, cv::Size image_size, int channels,
-                        const std::map<double, double>& frame_peaks, model::GhostTrack& g) {
+void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int channels,
+                        const std::vector<cv::Mat>& targets, const std::map<double, double>& frame_peaks,
+                        model::GhostTrack& g) {
   if (t.fits.size() < 2) return;
   const std::vector<double>& angles = t.angles_deg;
-  const ImageLevel level(image_size, kRefinePixels);
   const cv::Size size = level.size;
   const cv::Rect roi(0, 0, size.width, size.height);
   const model::ViewTransform& view = level.view;
   const model::RenderOptions render;
-  std::vector<cv::Mat> targets;
   std::vector<double> weights;
-  for (size_t i = 0; i < t.fits.size(); ++i) {
-    targets.push_back(model::renderGhosts(std::span(&t.fits[i], 1), size, channels, render, view));
-    const double peak = frame_peaks.at(angles[i]);
+  for (double angle : angles) {
+    const double peak = frame_peaks.at(angle);
     weights.push_back(1.0 / std::max(peak * peak, 1e-30));
   }
   const int count = model::parameterCount(channels);
@@ -421,6 +412,8 @@ void refineTrackInImage(const GhostTrackFit& t, cv::Size image_size, int channel
   for (int k = 0; k < count; ++k)
     offset[k + 1] = offset[k] + static_cast<int>(g.parameters[k].coefficients.size());
   const int n = offset[count];
+  std::vector<int> parameter_of(n);  // the parameter of each unknown
+  for (int k = 0; k < count; ++k) std::fill(parameter_of.begin() + offset[k], parameter_of.begin() + offset[k + 1], k);
   // Σ_frames w ‖model − fit‖², and with `jtj`, `jtr`: JᵀJ and Jᵀr of that sum.
   auto evaluate = [&](const model::GhostTrack& track, Eigen::MatrixXd* jtj, Eigen::VectorXd* jtr) {
     double cost = 0;
@@ -475,12 +468,9 @@ void refineTrackInImage(const GhostTrackFit& t, cv::Size image_size, int channel
         for (int j = offset[k]; j < offset[k + 1]; ++j, pw *= tt) power(j) = pw;
       }
       for (int a = 0; a < n; ++a) {
-        const int ka = static_cast<int>(std::upper_bound(offset.begin(), offset.end(), a) - offset.begin()) - 1;
-        (*jtr)(a) += weights[f] * power(a) * grad(ka);
-        for (int b = 0; b <= a; ++b) {
-          const int kb = static_cast<int>(std::upper_bound(offset.begin(), offset.end(), b) - offset.begin()) - 1;
-          (*jtj)(a, b) += weights[f] * power(a) * power(b) * gram(ka, kb);
-        }
+        (*jtr)(a) += weights[f] * power(a) * grad(parameter_of[a]);
+        for (int b = 0; b <= a; ++b)
+          (*jtj)(a, b) += weights[f] * power(a) * power(b) * gram(parameter_of[a], parameter_of[b]);
       }
     }
     if (jtj) *jtj = jtj->selfadjointView<Eigen::Lower>();
@@ -509,7 +499,8 @@ void refineTrackInImage(const GhostTrackFit& t, cv::Size image_size, int channel
   for (int it = 0, rejected = 0; it < kMaxIterations && rejected < 8;) {
     Eigen::MatrixXd a = jtj;
     Eigen::VectorXd b = -jtr;
-    for (int i = 0; i < n; ++i) a(i, i) += mu * std::max(jtj(i, i), 1e-12 * jtj.diagonal().maxCoeff());
+    const double damping_floor = 1e-12 * jtj.diagonal().maxCoeff();
+    for (int i = 0; i < n; ++i) a(i, i) += mu * std::max(jtj(i, i), damping_floor);
     for (int k = 0; k < count; ++k) {
       if (!held[k]) continue;
       for (int i = offset[k]; i < offset[k + 1]; ++i) {
@@ -551,15 +542,23 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
   model::FlareModel m;
   m.capture = info;
   m.channels = channels;
-  // Each fitted frame's flare peak (its brightest fit): the refinement weighs every frame's error
-  // by it, as PSNR does.
+  // For the refinement: every fit rendered on its level (its targets), and each fitted frame's
+  // flare peak, its brightest fit there, by which it weighs the frame's error as PSNR does.
+  const ImageLevel refine_level(info.image_size, kRefinePixels);
+  std::vector<std::vector<cv::Mat>> fit_images(tracks.size());
   std::map<double, double> frame_peaks;
   if (refine_in_image) {
-    const ImageLevel level(info.image_size, kRefinePixels);
-    for (const auto& t : tracks)
-      for (size_t i = 0; i < t.fits.size(); ++i) {
-        double& peak = frame_peaks[t.angles_deg[i]];
-        peak = std::max(peak, renderedPeak(t.fits[i], level, channels));
+    tbb::parallel_for(size_t{0}, tracks.size(), [&](size_t i) {
+      for (const auto& fit : tracks[i].fits)
+        fit_images[i].push_back(
+            model::renderGhosts(std::span(&fit, 1), refine_level.size, channels, {}, refine_level.view));
+    });
+    for (size_t i = 0; i < tracks.size(); ++i)
+      for (size_t j = 0; j < fit_images[i].size(); ++j) {
+        double peak = 0;
+        cv::minMaxLoc(fit_images[i][j].reshape(1), nullptr, &peak);
+        double& frame_peak = frame_peaks[tracks[i].angles_deg[j]];
+        frame_peak = std::max(frame_peak, peak);
       }
   }
   // Each track on its own (in parallel: the refinement renders every frame of a track many times).
@@ -614,7 +613,7 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
       for (size_t i = 0; i < inlier.size(); ++i) image_inliers[i] = image_inliers[i] && inlier[i];
     }
     fitIntensitiesInImage(t, image_inliers, info.image_size, channels, intensity_degree, g);
-    if (refine_in_image) refineTrackInImage(t, info.image_size, channels, frame_peaks, g);
+    if (refine_in_image) refineTrackInImage(t, refine_level, channels, fit_images[track_index], frame_peaks, g);
   });
   return m;
 }
