@@ -166,20 +166,71 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
   cv::warpAffine(valid, mirrored_valid, reflect, valid.size(), cv::INTER_NEAREST | cv::WARP_INVERSE_MAP,
                  cv::BORDER_CONSTANT, cv::Scalar(255));
   const int channels = residual.channels();
+  // The distance of a pixel's centre from the light, and the ring of whole pixels it lies in.
+  auto distance = [&](int x, int y) { return std::hypot(x + 0.5 - light.center.x, y + 0.5 - light.center.y); };
+  auto ring = [&](int x, int y) { return static_cast<int>(distance(x, y)); };
+  const int rings = 2 + static_cast<int>(std::ceil(std::hypot(residual.cols, residual.rows) +
+                                                   std::hypot(light.center.x, light.center.y)));
+  // S where the mirror point is in the frame, and each ring's values of it per channel.
+  std::vector<std::vector<std::vector<float>>> known(channels, std::vector<std::vector<float>>(rings));
+  std::vector<uchar> mirror_outside(residual.total(), 0);
   for (int y = 0; y < residual.rows; ++y) {
     const float* r = smooth.ptr<float>(y);
     const float* m = mirrored.ptr<float>(y);
     const uchar* mv = mirrored_valid.ptr<uchar>(y);
     float* s = light_image.ptr<float>(y);
-    for (int x = 0; x < residual.cols; ++x)
+    for (int x = 0; x < residual.cols; ++x) {
+      if (std::isnan(m[x * channels])) {
+        mirror_outside[static_cast<size_t>(y) * residual.cols + x] = 1;
+        continue;
+      }
       for (int c = 0; c < channels; ++c) {
         const int i = x * channels + c;
-        float v;
-        if (std::isnan(m[i])) v = 0;          // the mirror point is outside the frame
-        else if (!mv[x]) v = r[i];            // beside the core: the light rules
-        else v = std::min(r[i], m[i]);
-        s[i] = std::max(0.0f, v);
+        s[i] = std::max(0.0f, mv[x] ? std::min(r[i], m[i]) : r[i]);  // beside the core the light rules
+        if (mv[x]) known[c][ring(x, y)].push_back(s[i]);
       }
+    }
+  }
+  // Where the mirror point is outside the frame (the light near its border), the light is taken as
+  // the same in every direction: S = min(R̃(p), P(|p − c|)), P the largest S over the ring's pixels
+  // whose mirror is in the frame, made non-increasing outwards so that a ghost in a ring does not
+  // raise it, and 0 from the first ring outside the core with too few such pixels to tell. The
+  // halo is radial and the starburst's spikes (the aperture's diffraction) as long in every
+  // direction, so P is the spikes' level, and between them S is the halo; S itself, not R̃, is
+  // taken over the ring, the ghosts in it already left out by their mirror points. With S = 0
+  // there, the halo and spikes beside a light 33 px from the border were fitted as two ghosts
+  // 3–10× brighter than the flare (Heliar 640×427 at 9.2°: PSNR 5.8 dB); with the rings' median
+  // the spikes were still fitted (13.1 dB), with their 95th percentile 27.0 dB.
+  constexpr size_t kMinRingPixels = 8;
+  std::vector<std::vector<float>> profile(channels, std::vector<float>(rings, 0.0f));
+  for (int c = 0; c < channels; ++c) {
+    float running = std::numeric_limits<float>::infinity();
+    for (int k = 0; k < rings; ++k) {
+      std::vector<float>& v = known[c][k];
+      if (v.size() < kMinRingPixels) {
+        if (std::isfinite(running)) running = 0;  // past the core: nothing known from here outwards
+        continue;
+      }
+      running = std::min(running, *std::max_element(v.begin(), v.end()));
+      profile[c][k] = running;
+    }
+  }
+  for (int y = 0; y < residual.rows; ++y) {
+    const float* r = smooth.ptr<float>(y);
+    float* s = light_image.ptr<float>(y);
+    for (int x = 0; x < residual.cols; ++x) {
+      if (!mirror_outside[static_cast<size_t>(y) * residual.cols + x]) continue;
+      // Between the rings' middles (ring k holds distances k to k + 1): halos are steep near the
+      // core, tens of σ per pixel.
+      const double t = std::max(0.0, distance(x, y) - 0.5);
+      const int k = std::min(static_cast<int>(t), rings - 2);
+      const double f = t - k;
+      for (int c = 0; c < channels; ++c) {
+        const int i = x * channels + c;
+        const double p = (1 - f) * profile[c][k] + f * profile[c][k + 1];
+        s[i] = std::max(0.0f, std::min(r[i], static_cast<float>(p)));
+      }
+    }
   }
   // Only the light's own region: the part of {S > light_zone_sigma σ} connected to the core. Away
   // from the light, min(R(p), R(2c − p)) is not the light but whatever is smooth there (the

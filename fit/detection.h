@@ -116,7 +116,10 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
 //   S(p) = max(0, min(R̃(p), R̃(2c − p)))
 // with R̃ the residual smoothed by light_smoothing_px: where a ghost covers p, its mirror point
 // shows the light alone. Where 2c − p is saturated (the core's reflection: p is beside the core,
-// ruled by the light) S = R̃(p); where 2c − p is outside the frame nothing is known and S = 0.
+// ruled by the light) S = R̃(p). Where 2c − p is outside the frame (the light near its border)
+// the light is taken as the same in every direction (a radial halo, spikes as long in every
+// direction): S = min(R̃(p), P(|p − c|)), P the largest S over the pixels at that
+// distance whose mirror point is in the frame, non-increasing outwards (0 where there are none).
 // A ghost centred on c itself (θ ≈ 0) is symmetric too and goes into S; the fitter's tracks and
 // shape prior carry ghosts through those frames. Returns zeros when the light
 // is not found. S is kept only over the light's own region: the part of S > light_zone_sigma ×

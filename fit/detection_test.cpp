@@ -1,4 +1,5 @@
-// Tests of ghost detection in a residual: the search for veils that fill the frame.
+// Tests of ghost detection in a residual: the light's own image, the search for veils that fill
+// the frame, and veiling glare.
 #include "fit/detection.h"
 
 #include <gtest/gtest.h>
@@ -88,6 +89,62 @@ TEST(DetectGlare, SeedsGlareOnAPedestalAndNothingOnNoiseOrAGhost) {
   EXPECT_NEAR(glare->seed.center_y, 107, 1);
   EXPECT_FALSE(detectGlare(noisy({}, size, sigma), valid, sigma, kNoLight, options).has_value());
   EXPECT_FALSE(detectGlare(noisy({disc(160, 107, 60, 30 * sigma)}, size, sigma), valid, sigma, kNoLight, options).has_value());
+}
+
+// A light 20 px from the frame's left border: its halo and the starburst's spikes reach 100 px into
+// the frame, where the mirror points lie outside it. They are taken away there as well (the light
+// is the same in every direction), the ghost beside them is kept.
+TEST(EstimateLightImage, TakesTheLightAwayWhereItsMirrorIsOutsideTheFrame) {
+  const cv::Size size(240, 160);
+  const double sigma = 1e-3;
+  LightImage light;
+  light.found = true;
+  light.center = {20, 80};
+  light.core_radius_px = 4;
+  light.zone_radius_px = 100;
+  const GhostParameters ghost = disc(170, 80, 15, 30 * sigma);
+  cv::Mat frame = noisy({ghost}, size, sigma);
+  cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  // A radial halo and six spikes 3 px wide (a hexagonal aperture's), one of them upright: two
+  // point into the frame from the light at ±30°, their mirror images out of it.
+  auto light_at = [&](double dx, double dy) {
+    const double rho = std::hypot(dx, dy);
+    double spikes = 0;
+    for (int k = 0; k < 6; ++k) {
+      const double phi = CV_PI / 6 + k * CV_PI / 3;
+      const double along = dx * std::cos(phi) + dy * std::sin(phi);
+      const double across = -dx * std::sin(phi) + dy * std::cos(phi);
+      if (along > 0) spikes += std::exp(-across * across / (3.0 * 3.0));
+    }
+    return sigma * std::exp(-rho / 15) * (2000 + 4000 * spikes);
+  };
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const double dx = x + 0.5 - light.center.x, dy = y + 0.5 - light.center.y;
+      if (std::hypot(dx, dy) < light.core_radius_px) {
+        valid.at<uchar>(y, x) = 0;
+        frame.at<float>(y, x) = 1;
+      } else {
+        frame.at<float>(y, x) += static_cast<float>(light_at(dx, dy));
+      }
+    }
+  const DetectionOptions options;
+  const cv::Mat rest = frame - estimateLightImage(frame, valid, light, sigma, options);
+  // Beyond the mirror's reach (x > 40), over the light's own region (the halo above
+  // light_zone_sigma = 50 σ out to ρ = 55 px; ρ < 50 px here): a halo of 70–490 σ is left within
+  // the noise, and spikes of up to 1500 σ within 10 σ (their centres lie at other offsets from the
+  // pixel grid than the upright spike's, by which the rings measure them).
+  std::vector<double> left_over;
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 41; x < 70; ++x) {
+      const double rho = std::hypot(x + 0.5 - light.center.x, y + 0.5 - light.center.y);
+      if (rho < 50) left_over.push_back(std::abs(rest.at<float>(y, x)));
+    }
+  std::sort(left_over.begin(), left_over.end());
+  EXPECT_LT(left_over[left_over.size() / 2], 1.5 * sigma);
+  EXPECT_LT(left_over[left_over.size() * 99 / 100], 10 * sigma);
+  // The ghost (where the halo is below 0.1 σ) keeps its brightness.
+  EXPECT_NEAR(cv::mean(rest(cv::Rect(162, 72, 16, 16)))[0], 30 * sigma, 1 * sigma);
 }
 
 }  // namespace

@@ -409,5 +409,27 @@ TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
   EXPECT_GT(carried, 0);
 }
 
+// A ghost that one frame does not show (there its fit sinks into the noise, as a faint veil's
+// fit breaks down for a frame) ends one track and starts another: the two are one ghost, and the
+// model has one, across that frame.
+TEST(FitCapture, AGhostLostForOneFrameIsOneGhost) {
+  FrameStack stack = testStack();
+  cv::theRNG().state = 11;
+  for (int i = 0; i < 13; ++i) {
+    const double theta = 0.25 * i;
+    const double brightness = i == 6 ? 0 : 1;
+    Frame f = ghostFrame(stack, i, theta, {ghostAt(50 + 8 * theta, brightness, 0.4 * brightness)});
+    addNoise(f, 0.01);
+    stack.frames.push_back(f);
+  }
+  FitOptions options;
+  options.progress = false;
+  const FitResult r = fitCapture(stack, options);
+  ASSERT_EQ(r.model.ghosts.size(), 1u) << r.summary.BriefReport();
+  const auto at = r.model.ghostsAt(1.5);
+  ASSERT_EQ(at.size(), 1u);
+  EXPECT_NEAR(at[0].parameters.center_x, 62, 0.5);
+}
+
 }  // namespace
 }  // namespace flarekit::fit
