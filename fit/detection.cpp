@@ -198,9 +198,10 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
   // halo is radial and the starburst's spikes (the aperture's diffraction) as long in every
   // direction, so P is the spikes' level, and between them S is the halo; S itself, not R̃, is
   // taken over the ring, the ghosts in it already left out by their mirror points. With S = 0
-  // there, the halo and spikes beside a light 33 px from the border were fitted as two ghosts
-  // 3–10× brighter than the flare (Heliar 640×427 at 9.2°: PSNR 5.8 dB); with the rings' median
-  // the spikes were still fitted (13.1 dB), with their 95th percentile 27.0 dB.
+  // there, the halo and spikes beside a light 33–45 px from the border were fitted as ghosts 3–10×
+  // brighter than the flare (Heliar 640×427 fit at λ = 1, 9.0–10.0°: PSNR 5.8–11.8 dB; with this,
+  // 15.6 and 16.1 dB at 9.0 and 9.2°, where a veil is missing, and 24.9–25.4 dB at 9.4–10.0°).
+  // The rings' median left the spikes, and they were fitted (13.1 dB at 9.2°).
   constexpr size_t kMinRingPixels = 8;
   std::vector<std::vector<float>> profile(channels, std::vector<float>(rings, 0.0f));
   for (int c = 0; c < channels; ++c) {
