@@ -169,10 +169,13 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
   // The distance of a pixel's centre from the light, and the ring of whole pixels it lies in.
   auto distance = [&](int x, int y) { return std::hypot(x + 0.5 - light.center.x, y + 0.5 - light.center.y); };
   auto ring = [&](int x, int y) { return static_cast<int>(distance(x, y)); };
-  const int rings = 2 + static_cast<int>(std::ceil(std::hypot(residual.cols, residual.rows) +
-                                                   std::hypot(light.center.x, light.center.y)));
-  // S where the mirror point is in the frame, and each ring's values of it per channel.
-  std::vector<std::vector<std::vector<float>>> known(channels, std::vector<std::vector<float>>(rings));
+  const int rings = 2 + static_cast<int>(std::ceil(std::max(
+                            {distance(0, 0), distance(residual.cols - 1, 0), distance(0, residual.rows - 1),
+                             distance(residual.cols - 1, residual.rows - 1)})));
+  // S where the mirror point is in the frame; per channel and ring, the largest of it and how many
+  // pixels it is known at.
+  std::vector<std::vector<float>> ring_max(channels, std::vector<float>(rings, 0.0f));
+  std::vector<int> ring_known(rings, 0);
   std::vector<uchar> mirror_outside(residual.total(), 0);
   for (int y = 0; y < residual.rows; ++y) {
     const float* r = smooth.ptr<float>(y);
@@ -184,10 +187,12 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
         mirror_outside[static_cast<size_t>(y) * residual.cols + x] = 1;
         continue;
       }
+      const int k = ring(x, y);
+      if (mv[x]) ++ring_known[k];
       for (int c = 0; c < channels; ++c) {
         const int i = x * channels + c;
         s[i] = std::max(0.0f, mv[x] ? std::min(r[i], m[i]) : r[i]);  // beside the core the light rules
-        if (mv[x]) known[c][ring(x, y)].push_back(s[i]);
+        if (mv[x]) ring_max[c][k] = std::max(ring_max[c][k], s[i]);
       }
     }
   }
@@ -202,17 +207,16 @@ cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const 
   // brighter than the flare (Heliar 640×427 fit at λ = 1, 9.0–10.0°: PSNR 5.8–11.8 dB; with this,
   // 15.6 and 16.1 dB at 9.0 and 9.2°, where a veil is missing, and 24.9–25.4 dB at 9.4–10.0°).
   // The rings' median left the spikes, and they were fitted (13.1 dB at 9.2°).
-  constexpr size_t kMinRingPixels = 8;
+  constexpr int kMinRingPixels = 8;
   std::vector<std::vector<float>> profile(channels, std::vector<float>(rings, 0.0f));
   for (int c = 0; c < channels; ++c) {
     float running = std::numeric_limits<float>::infinity();
     for (int k = 0; k < rings; ++k) {
-      std::vector<float>& v = known[c][k];
-      if (v.size() < kMinRingPixels) {
+      if (ring_known[k] < kMinRingPixels) {
         if (std::isfinite(running)) running = 0;  // past the core: nothing known from here outwards
         continue;
       }
-      running = std::min(running, *std::max_element(v.begin(), v.end()));
+      running = std::min(running, ring_max[c][k]);
       profile[c][k] = running;
     }
   }
