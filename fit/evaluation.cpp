@@ -212,6 +212,7 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
           ++fe.true_ghosts_found;
           const double e = cv::norm(true_blobs[t].centroid - model_blobs[true_match[t]].centroid);
           fe.centroid_errors_px.push_back(e);
+          fe.matched.push_back({true_blobs[t].id, model_blobs[true_match[t]].id, true_blobs[t].radius, e});
           errors.push_back(e);
         } else {
           fe.missed_true_ids.push_back(true_blobs[t].id);
@@ -266,6 +267,16 @@ nlohmann::json missed(const FrameEvaluation& f) {
                  {"nearest_distance_px", number(m.nearest_distance_px)}});
   return a;
 }
+
+nlohmann::json matched(const FrameEvaluation& f) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& m : f.matched)
+    a.push_back({{"true_id", m.true_id},
+                 {"model_id", m.model_id},
+                 {"radius_px", m.radius_px},
+                 {"centroid_error_px", m.centroid_error_px}});
+  return a;
+}
 }  // namespace
 
 nlohmann::json Evaluation::toJson() const {
@@ -293,6 +304,7 @@ nlohmann::json Evaluation::toJson() const {
                   {"model_ghosts_matched", f.model_ghosts_matched},
                   {"median_centroid_error_px", number(medianOf(f.centroid_errors_px))},
                   {"missed_true_ids", f.missed_true_ids},
+                  {"matched", matched(f)},
                   {"missed", missed(f)},
                   {"unmatched_model_ids", f.unmatched_model_ids}});
   }

@@ -84,6 +84,13 @@ TEST(EvaluateModel, MatchGateFollowsTheGhostsSizeNotACausticsSpike) {
   EXPECT_GT(ev.median_centroid_error_px, 3);
   EXPECT_LT(ev.median_centroid_error_px, 12.5);
   EXPECT_DOUBLE_EQ(ev.precision, 1);
+  // The pair is listed with its error and the true ghost's radius (which pairs make the median).
+  const auto matched = ev.toJson()["frames"][0]["matched"];
+  ASSERT_EQ(matched.size(), 1u);
+  EXPECT_EQ(matched[0]["true_id"], 0);
+  EXPECT_EQ(matched[0]["model_id"], 0);
+  EXPECT_DOUBLE_EQ(matched[0]["centroid_error_px"].get<double>(), ev.median_centroid_error_px);
+  EXPECT_NEAR(matched[0]["radius_px"].get<double>(), 50, 2);
 }
 
 TEST(EvaluateModel, AMissedGhostSaysWhereItIsAndHowFarTheNearestModelGhostIs) {

@@ -63,7 +63,7 @@ std::string FitSummary::BriefReport() const {
   s.precision(3);
   s << "Fitted " << ghosts << " ghost(s) over " << frames_fitted << " of " << frames_total
     << " frames with " << optimizer << " in " << seconds_total << " s (fitting " << seconds_fitting
-    << " s, detection " << seconds_detecting << " s); " << detections << " ghost(s) detected, "
+    << " s, detection " << seconds_detecting << " s, model " << seconds_modelling << " s); " << detections << " ghost(s) detected, "
     << detections_rejected << " candidate(s) rejected, " << ghosts_dropped_short
     << " short track(s) dropped; " << iterations << " iterations, " << evaluations
     << " cost evaluations; polynomial degree " << (degree < 0 ? std::string("auto") : std::to_string(degree)) << ".";
@@ -751,7 +751,11 @@ class CaptureFitter {
     progress.finish();
     if (logLevel() >= LogLevel::kDebug)
       logDebug("fit: " + std::to_string(group_resolves_) + " ghost group(s) solved again (others moved onto them)");
-    return finish(since(t0));
+    const auto t_model = Clock::now();
+    FitResult result = finish();
+    result.summary.seconds_modelling = since(t_model);
+    result.summary.seconds_total = since(t0);
+    return result;
   }
 
  private:
@@ -1249,7 +1253,7 @@ class CaptureFitter {
     }
   }
 
-  FitResult finish(double seconds) {
+  FitResult finish() {
     joinMergedTracks();
     joinAbuttingTracks();
     FitResult result;
@@ -1350,7 +1354,6 @@ class CaptureFitter {
     s.detections_rejected = rejected_;
     s.evaluations = evaluations_;
     s.iterations = iterations_;
-    s.seconds_total = seconds;
     s.seconds_fitting = seconds_fitting_;
     s.seconds_detecting = seconds_detecting_;
     return result;

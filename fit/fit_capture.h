@@ -122,7 +122,9 @@ struct FitSummary {
   int detections_rejected = 0; // candidates whose fit did not explain their blob
   long long evaluations = 0;   // cost evaluations over all solves
   long long iterations = 0;
-  double seconds_total = 0, seconds_fitting = 0, seconds_detecting = 0;
+  // Wall time of the whole fit, and of its parts: the frames' fits, detection, and the model
+  // (the residual check of every frame, the polynomials and their refinement in image space).
+  double seconds_total = 0, seconds_fitting = 0, seconds_detecting = 0, seconds_modelling = 0;
   int degree = 2;              // or -1 for auto
   // Ghosts the model cannot describe well: id and the fraction of its frames flagged.
   std::vector<std::pair<int, double>> unexplained;

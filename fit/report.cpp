@@ -75,6 +75,9 @@ void writeFitReport(const fs::path& dir, const FitResult& result, const FrameSta
   summary["detections_rejected"] = s.detections_rejected;
   summary["ghosts_dropped_short"] = s.ghosts_dropped_short;
   summary["seconds_total"] = s.seconds_total;
+  summary["seconds_fitting"] = s.seconds_fitting;
+  summary["seconds_detecting"] = s.seconds_detecting;
+  summary["seconds_modelling"] = s.seconds_modelling;
   summary["evaluations"] = s.evaluations;
   summary["warnings"] = s.warnings;
   nlohmann::json ghosts = nlohmann::json::array();

@@ -97,7 +97,13 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
   ASSERT_EQ(fit.exit_code, 0) << fit.err;
   const model::FlareModel m = model::FlareModel::load(model);
   EXPECT_EQ(m.ghosts.size(), 2u);
-  EXPECT_TRUE(fs::exists(dir / "report" / "summary.json"));
+  ASSERT_TRUE(fs::exists(dir / "report" / "summary.json"));
+  // The whole fit's time holds its parts, the model's building (polynomials, refinement) too.
+  const auto summary = nlohmann::json::parse(std::ifstream(dir / "report" / "summary.json"));
+  EXPECT_GT(summary["seconds_modelling"].get<double>(), 0);
+  EXPECT_GE(summary["seconds_total"].get<double>(), summary["seconds_fitting"].get<double>() +
+                                                         summary["seconds_detecting"].get<double>() +
+                                                         summary["seconds_modelling"].get<double>());
   auto eval = runFlarekit({"-q", "fit-eval", model, (dir / "capture").string(), "--json"});
   ASSERT_EQ(eval.exit_code, 0) << eval.err;
   const auto j = nlohmann::json::parse(eval.out);
