@@ -112,6 +112,12 @@ double medianOf(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
+double FrameEvaluation::medianCentroidErrorPx() const {
+  std::vector<double> errors;
+  for (const auto& m : matched) errors.push_back(m.centroid_error_px);
+  return medianOf(errors);
+}
+
 Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
                          const EvaluationOptions& options) {
   std::string error;
@@ -211,7 +217,6 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
         if (true_match[t] >= 0) {
           ++fe.true_ghosts_found;
           const double e = cv::norm(true_blobs[t].centroid - model_blobs[true_match[t]].centroid);
-          fe.centroid_errors_px.push_back(e);
           fe.matched.push_back({true_blobs[t].id, model_blobs[true_match[t]].id, true_blobs[t].radius, e});
           errors.push_back(e);
         } else {
@@ -302,7 +307,7 @@ nlohmann::json Evaluation::toJson() const {
                   {"true_ghosts_found", f.true_ghosts_found},
                   {"model_ghosts", f.model_ghosts},
                   {"model_ghosts_matched", f.model_ghosts_matched},
-                  {"median_centroid_error_px", number(medianOf(f.centroid_errors_px))},
+                  {"median_centroid_error_px", number(f.medianCentroidErrorPx())},
                   {"missed_true_ids", f.missed_true_ids},
                   {"matched", matched(f)},
                   {"missed", missed(f)},

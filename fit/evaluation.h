@@ -49,7 +49,6 @@ struct FrameEvaluation {
   int true_ghosts_found = 0;       // visible and matched
   int model_ghosts = 0;            // model ghosts with any pixel in the image
   int model_ghosts_matched = 0;    // matched to some true ghost
-  std::vector<double> centroid_errors_px;  // per matched visible pair
   // Each matched visible true ghost: its model ghost and how far their centroids are apart.
   struct Matched {
     int true_id = 0, model_id = 0;
@@ -57,6 +56,7 @@ struct FrameEvaluation {
     double centroid_error_px = 0;
   };
   std::vector<Matched> matched;
+  double medianCentroidErrorPx() const;  // over `matched` (NaN when none)
   std::vector<int> missed_true_ids;        // visible true ghosts without a match
   // Each missed visible true ghost: where it is, and the nearest model ghost (why it is missed:
   // none near it, or one beyond the gate).

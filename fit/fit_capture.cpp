@@ -63,8 +63,8 @@ std::string FitSummary::BriefReport() const {
   s.precision(3);
   s << "Fitted " << ghosts << " ghost(s) over " << frames_fitted << " of " << frames_total
     << " frames with " << optimizer << " in " << seconds_total << " s (fitting " << seconds_fitting
-    << " s, detection " << seconds_detecting << " s, model " << seconds_modelling << " s); " << detections << " ghost(s) detected, "
-    << detections_rejected << " candidate(s) rejected, " << ghosts_dropped_short
+    << " s, detection " << seconds_detecting << " s, model " << seconds_modelling << " s); "
+    << detections << " ghost(s) detected, " << detections_rejected << " candidate(s) rejected, " << ghosts_dropped_short
     << " short track(s) dropped; " << iterations << " iterations, " << evaluations
     << " cost evaluations; polynomial degree " << (degree < 0 ? std::string("auto") : std::to_string(degree)) << ".";
   if (!unexplained.empty()) {
