@@ -64,8 +64,9 @@ struct DetectionOptions {
   // fell from 0.91 to 0.78, and to 0.42–0.98 under 1 % changes of λ and the shape prior
   // (0.92–0.97 without): veils seeded while the light was in the frame changed the model's mean flux
   // at 0–8° by up to 2× (7.4°: 0.042 against 0.021), where the renderer's falls steadily with θ.
-  // (All measured with the fitter of commit fedfafa. The nearest-point search's convexity bound
-  // since then moved every fit, as any change the size of rounding does; not measured again.)
+  // (All measured with the fitter of commit fedfafa.) Measured again with that of 6441292, the
+  // same way, they still do not: Heliar 64.7 → 67.1 %, 86.0 → 84.4 %, 26.1 → 25.2 dB,
+  // 8.3 → 7.5 px; Tessar 52.9 → 53.7 %, 79.0 → 78.0 %, 23.6 → 23.1 dB, 11.1 → 12.4 px.
   bool find_veils = false;
   // Seed veiling glare (detectGlare; fit/cost.h isGlare) where the residual's median over the frame
   // is above glare_sigma noise σ and no glare is modelled yet.
