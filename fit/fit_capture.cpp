@@ -64,8 +64,8 @@ std::string FitSummary::BriefReport() const {
   s << "Fitted " << ghosts << " ghost(s) over " << frames_fitted << " of " << frames_total
     << " frames with " << optimizer << " in " << seconds_total << " s (fitting " << seconds_fitting
     << " s, detection " << seconds_detecting << " s, model " << seconds_modelling << " s); "
-    << detections << " ghost(s) detected, " << detections_rejected << " candidate(s) rejected, " << ghosts_dropped_short
-    << " short track(s) dropped; " << iterations << " iterations, " << evaluations
+    << detections << " ghost(s) detected, " << detections_rejected << " candidate(s) rejected, "
+    << ghosts_dropped_short << " short track(s) dropped; " << iterations << " iterations, " << evaluations
     << " cost evaluations; polynomial degree " << (degree < 0 ? std::string("auto") : std::to_string(degree)) << ".";
   if (!unexplained.empty()) {
     s << " Not described by the model in part of their frames:";
@@ -753,8 +753,11 @@ class CaptureFitter {
       logDebug("fit: " + std::to_string(group_resolves_) + " ghost group(s) solved again (others moved onto them)");
     const auto t_model = Clock::now();
     FitResult result = finish();
-    result.summary.seconds_modelling = since(t_model);
-    result.summary.seconds_total = since(t0);
+    FitSummary& s = result.summary;
+    s.seconds_fitting = seconds_fitting_;
+    s.seconds_detecting = seconds_detecting_;
+    s.seconds_modelling = since(t_model);
+    s.seconds_total = since(t0);
     return result;
   }
 
@@ -1354,8 +1357,6 @@ class CaptureFitter {
     s.detections_rejected = rejected_;
     s.evaluations = evaluations_;
     s.iterations = iterations_;
-    s.seconds_fitting = seconds_fitting_;
-    s.seconds_detecting = seconds_detecting_;
     return result;
   }
 
