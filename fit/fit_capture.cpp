@@ -518,11 +518,17 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
     for (int k = 0; k < count; ++k)
       if (left[k] && !held[k]) held[k] = newly_held = true;
     if (newly_held) continue;
-    const double trial_cost = evaluate(trial, nullptr, nullptr);
+    // With its derivatives at once: most steps are taken, and the rendering with derivatives draws
+    // the same image.
+    Eigen::MatrixXd trial_jtj;
+    Eigen::VectorXd trial_jtr;
+    const double trial_cost = evaluate(trial, &trial_jtj, &trial_jtr);
     if (trial_cost < cost) {
       const bool converged = cost - trial_cost < 1e-4 * cost;
       g = std::move(trial);
-      cost = evaluate(g, &jtj, &jtr);
+      cost = trial_cost;
+      jtj = std::move(trial_jtj);
+      jtr = std::move(trial_jtr);
       mu = std::max(mu / 3, 1e-9);
       ++it;
       rejected = 0;
