@@ -441,7 +441,8 @@ double GroupCost::loss(double u) const {
   return b * std::log1p(u / b);
 }
 
-double GroupCost::robustSample(int sample, double* residuals, double* const* jacobians) const {
+double GroupCost::robustSample(int sample, double* residuals, double* const* jacobians,
+                               bool* reached) const {
   const int m = residualsPerSample(), n = parameters_per_ghost_;
   sampleResiduals(sample, residuals);
   double sqrt_rho1 = 1, rest = 0;  // √ρ′(u) and ρ(u) − ρ′(u)·u
@@ -454,9 +455,13 @@ double GroupCost::robustSample(int sample, double* residuals, double* const* jac
     rest = std::max(0.0, b * (std::log1p(x) - x / (1 + x)));
   }
   if (jacobians != nullptr)
-    for (int g = 0; g < ghost_count_; ++g)
-      if (double* J = jacobians[g]; J != nullptr && sampleJacobian(sample, g, J) && sqrt_rho1 != 1)
+    for (int g = 0; g < ghost_count_; ++g) {
+      double* J = jacobians[g];
+      const bool nonzero = J != nullptr && sampleJacobian(sample, g, J);
+      if (reached) reached[g] = nonzero;
+      if (nonzero && sqrt_rho1 != 1)
         for (int i = 0; i < m * n; ++i) J[i] *= sqrt_rho1;
+    }
   for (int i = 0; i < m; ++i) residuals[i] *= sqrt_rho1;
   return rest;
 }

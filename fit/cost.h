@@ -211,8 +211,10 @@ class GroupCost {
   // with ρ″ ≤ 0 like Cauchy's): r̃ = √ρ′(u)·r, J̃ = √ρ′(u)·J. Returns ρ(u) − ρ′(u)·u ≥ 0, the part of
   // the sample's cost ½ρ(u) that ½‖r̃‖² leaves out. A residual block of many samples then has the
   // loss per sample, the Gauss–Newton model and gradient of per-sample blocks, and its exact cost
-  // with one more residual, √(Σ of these), constant in the parameters.
-  double robustSample(int sample, double* residuals, double* const* jacobians) const;
+  // with one more residual, √(Σ of these), constant in the parameters. `reached` (one per ghost,
+  // when not null) says whose Jacobian rows are not all zero (the pixel is within its reach).
+  double robustSample(int sample, double* residuals, double* const* jacobians,
+                      bool* reached = nullptr) const;
   // The cost from the stored residuals.
   double totalCost() const;
 

@@ -131,8 +131,8 @@ TEST(GroupCost, AnalyticJacobianMatchesGradientChecker) {
   }
 }
 
-// The solver's residual blocks span tiles of pixels with the loss per pixel inside them
-// (GroupCost::robustSample). Summed over the samples, the weighted residuals and their rests must
+// The solver sums the samples' rows with the loss per pixel in them (GroupCost::robustSample,
+// fit/normal_equations.h). Summed over the samples, the weighted residuals and their rests must
 // give the cost exactly, and the weighted Jacobians times the weighted residuals its gradient, here
 // with pixels far in the Cauchy loss's outlier range (an unmodelled blob beside the ghost).
 TEST(GroupCost, RobustSamplesGiveTheCostAndItsGradient) {

@@ -3,16 +3,16 @@
 // (fit/cost.h), with either optimizer:
 //
 //  - kCeres (default): Ceres's Levenberg–Marquardt trust region with the parameters' bounds,
-//    residual blocks over tiles of 16×16 pixels of the region with Cauchy's loss per pixel inside
-//    them (shared/FITTING_NOTES.md; GroupCost::robustSample weights each pixel as Ceres's own loss
-//    would, so the steps are those of one block per pixel without Ceres's bookkeeping per block),
-//    analytic Jacobians from model/'s derivative images (the edge part is E applied to them), a
-//    dense Cholesky solve of the normal equations. The model is rendered and every tile's rows filled once per evaluation point
-//    through a ceres::EvaluationCallback, on every thread (TBB), each pixel into its own rows;
-//    Ceres itself runs on one thread: it sums its blocks' costs per thread, so with more threads
-//    the cost's rounding, the steps it accepts and so the whole capture's fit depended on the
-//    machine's thread count (data_synthetic Heliar: Spearman ρ of issue 7 0.79 with 2 threads, 0.90
-//    with 1).
+//    Cauchy's loss per pixel (shared/FITTING_NOTES.md; GroupCost::robustSample weights each pixel
+//    as Ceres's own loss would), analytic Jacobians from model/'s derivative images (the edge part
+//    is E applied to them), a dense Cholesky solve of the normal equations. The model is rendered
+//    once per evaluation point through a ceres::EvaluationCallback, and the pixels' normal
+//    equations formed tile by tile on every thread (TBB); Ceres sees them as one residual block of
+//    their square root (fit/normal_equations.h), which gives it the steps, gradient and cost of one
+//    block per pixel. Ceres itself runs on one thread: it sums its blocks' costs per thread, so
+//    with more threads the cost's rounding, the steps it accepts and so the whole capture's fit
+//    depended on the machine's thread count (data_synthetic Heliar: Spearman ρ of issue 7 0.79 with
+//    2 threads, 0.90 with 1).
 //  - kWalchGd: the paper's optimizer (Walch et al. 2018 §3.3.2) as the baseline: gradient descent
 //    with central-difference gradients, one step size per parameter, a global learning rate
 //    multiplied by 0.8 every 100 iterations, online updates in a fixed order, shape before shade.
@@ -43,7 +43,8 @@ struct SolverOptions {
   Optimizer optimizer = Optimizer::kCeres;
   // Ceres: maximum Levenberg–Marquardt iterations per group and frame (≥ 1).
   int max_iterations = 15;
-  // Ceres: stop when the relative cost change of a step is below this (> 0).
+  // Ceres: stop when a step's actual and predicted decrease are both below this fraction of the
+  // cost (MINPACK's ftol) (> 0).
   double function_tolerance = 1e-5;
   // Ceres: stop when the relative parameter change of a step is below this (> 0).
   double parameter_tolerance = 1e-7;
@@ -86,8 +87,8 @@ GroupFitResult solveGroup(GroupCost& cost, std::span<const model::GhostParameter
 
 // The whole group cost as one ceres::CostFunction of the ghosts' parameter blocks (one block per
 // ghost, parametersPerGhost() each; residuals: samples × residualsPerSample()), evaluating the
-// cost itself at the parameters it is given, without a loss. Slower than solveGroup's tiles; for
-// ceres::GradientChecker and tests. `cost` must outlive the function.
+// cost itself at the parameters it is given, without a loss. Slower than solveGroup's normal
+// equations; for ceres::GradientChecker and tests. `cost` must outlive the function.
 std::unique_ptr<ceres::CostFunction> makeGroupCostFunction(GroupCost& cost);
 
 // The step size of parameter `index` for the GD baseline and for finite-difference checks:
