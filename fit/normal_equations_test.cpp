@@ -8,30 +8,14 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/task_arena.h>
 
+#include "fit/testing.h"
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {
 namespace {
 
 using model::GhostParameters;
-
-GhostParameters ghost(double x, double y, double l, double r, double h, double ib, double ii) {
-  GhostParameters g;
-  g.center_x = x;
-  g.center_y = y;
-  g.left = l;
-  g.right = r;
-  g.height = h;
-  g.curvature_left = 0.5;
-  g.curvature_right = 0.6;
-  g.border = {ib, 0, 0};
-  g.inside = {ii, 0, 0};
-  g.inside_falloff = 6;
-  g.inside_exponent = 1.5;
-  g.outside_falloff = 3;
-  g.outside_exponent = 1.5;
-  return g;
-}
+using testing::ghost;
 
 struct Direct {
   Eigen::MatrixXd a;
