@@ -83,7 +83,7 @@ class RenderCallback : public ceres::EvaluationCallback {
   RenderCallback(GroupCost& cost, NormalEquations& normal, std::vector<std::vector<double>>& blocks)
       : cost_(cost), normal_(normal), blocks_(blocks) {}
   void PrepareForEvaluation(bool evaluate_jacobians, bool new_evaluation_point) override {
-    const bool have_derivatives = !evaluate_jacobians || with_jacobians_;
+    const bool have_derivatives = !evaluate_jacobians || cost_.hasJacobians();
     if (evaluated_ && have_derivatives && (!new_evaluation_point || sameBitsAsRendered())) return;
     std::vector<const double*> p;
     for (const auto& b : blocks_) p.push_back(b.data());
@@ -91,7 +91,6 @@ class RenderCallback : public ceres::EvaluationCallback {
     normal_.fill(evaluate_jacobians);
     rendered_ = blocks_;
     evaluated_ = true;
-    with_jacobians_ = evaluate_jacobians;
   }
 
  private:
@@ -108,7 +107,6 @@ class RenderCallback : public ceres::EvaluationCallback {
   std::vector<std::vector<double>>& blocks_;
   std::vector<std::vector<double>> rendered_;  // the parameters of the last rendering
   bool evaluated_ = false;
-  bool with_jacobians_ = false;  // whether the last rendering filled the Jacobian
 };
 
 // The region's samples as the square-root form of their normal equations (normal_equations.h),
