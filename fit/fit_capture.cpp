@@ -992,6 +992,13 @@ class CaptureFitter {
     // Ends and records.
     std::vector<int> kept_ids;
     std::vector<GhostParameters> kept;
+    // Keeps `g` as track t's ghost in this frame; `carried`: not fitted here (carriedInto).
+    auto keep = [&](Track& t, const GhostParameters& g, bool carried) {
+      t.fits[pos] = g;
+      if (carried) t.carried.insert(pos);
+      kept_ids.push_back(t.id);
+      kept.push_back(g);
+    };
     for (size_t i = 0; i < ghosts.size(); ++i) {
       Track& t = track(ids[i]);
       std::string reason = endReason(ghosts[i], noise_sigma);
@@ -1007,10 +1014,7 @@ class CaptureFitter {
           std::optional<GhostParameters> carried;
           if (!had && reason == "sank into the noise") carried = carriedInto(t, pos);
           if (carried) {
-            t.fits[pos] = *carried;
-            t.carried.insert(pos);
-            kept_ids.push_back(ids[i]);
-            kept.push_back(*carried);
+            keep(t, *carried, true);
             continue;
           }
           t.ended_low = true;
@@ -1029,10 +1033,7 @@ class CaptureFitter {
       if (!forward) {
         const std::optional<GhostParameters> carried = carriedInto(t, pos);
         if (carried && model::outlineBounds(*carried).contains(lightOf(pos).center)) {
-          t.fits[pos] = *carried;
-          t.carried.insert(pos);
-          kept_ids.push_back(ids[i]);
-          kept.push_back(*carried);
+          keep(t, *carried, true);
           continue;
         }
       }
@@ -1046,9 +1047,7 @@ class CaptureFitter {
           continue;
         }
       }
-      t.fits[pos] = ghosts[i];
-      kept_ids.push_back(ids[i]);
-      kept.push_back(ghosts[i]);
+      keep(t, ghosts[i], false);
     }
     seconds_fitting_ += since(t_fit);
 
