@@ -17,6 +17,29 @@ bool OptimizerBenchOptions::IsValid(std::string* error) const {
   return fit.IsValid(error);
 }
 
+CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& seed,
+                          const model::GhostParameters& ceres_end, const model::GhostParameters& gd_end) {
+  CeresEnd end;
+  const std::vector<double> a = model::toParameterVector(ceres_end), b = model::toParameterVector(gd_end);
+  constexpr int kSteps = 10;
+  for (int i = 0; i <= kSteps; ++i) {
+    const double t = static_cast<double>(i) / kSteps;
+    std::vector<double> p(a.size());
+    for (size_t k = 0; k < a.size(); ++k) p[k] = a[k] + t * (b[k] - a[k]);
+    const std::vector<model::GhostParameters> one = {model::fromParameterVector(p, ceres_end.channels)};
+    end.path_costs.push_back(cost.evaluate(one, false));
+  }
+  end.stalled = end.path_costs[1] < end.path_costs[0];
+  const auto names = model::parameterNames(ceres_end.channels);
+  const bool glare = isGlare(seed, cost.imageSize());
+  for (size_t k = 0; k < a.size(); ++k) {
+    const auto bounds = fitBounds(static_cast<int>(k), ceres_end.channels, cost.imageSize(),
+                                  cost.intensityLimit(), glare);
+    if (a[k] <= bounds.lower || a[k] >= bounds.upper) end.on_bounds.push_back(names[k]);
+  }
+  return end;
+}
+
 nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw InputError("bench fit: " + error);
@@ -25,7 +48,7 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
   std::vector<double> speedup_time, speedup_evals;
   const int n = static_cast<int>(stack.frames.size());
   Progress progress("bench fit", options.frames);
-  int reached = 0, total = 0;
+  int reached = 0, total = 0, stalled = 0;
   for (int k = 0; k < options.frames; ++k) {
     progress.advance();
     // Sample inside the range (the ends are where ghosts are hardest to see).
@@ -93,6 +116,13 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
           break;
         }
       entry["ceres_reached_gd_cost"] = ok;
+      const CeresEnd end = describeCeresEnd(lm_cost, seed, c.ghosts[0], g.ghosts[0]);
+      entry["ceres_parameters_on_bounds"] = end.on_bounds;
+      entry["path_costs_ceres_to_gd"] = end.path_costs;
+      if (!ok) {
+        entry["ceres_stalled"] = end.stalled;
+        if (end.stalled) ++stalled;
+      }
       cases.push_back(entry);
     }
   }
@@ -104,6 +134,8 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
   out["cases"] = cases;
   out["cases_total"] = total;
   out["cases_ceres_reached_gd_cost"] = reached;
+  // Of the cases Ceres did not win, those where it stopped on a slope towards the GD's end.
+  out["cases_ceres_stalled"] = stalled;
   auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   out["median_speedup_time"] = num(medianOf(speedup_time));
   out["median_speedup_evaluations"] = num(medianOf(speedup_evals));
