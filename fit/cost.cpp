@@ -168,6 +168,14 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   return b;
 }
 
+std::vector<model::ParameterBounds> fitBounds(const GroupCost& cost, const model::GhostParameters& seed) {
+  const bool glare = isGlare(seed, cost.imageSize());
+  std::vector<model::ParameterBounds> bounds;
+  for (int k = 0; k < cost.parametersPerGhost(); ++k)
+    bounds.push_back(fitBounds(k, cost.channels(), cost.imageSize(), cost.intensityLimit(), glare));
+  return bounds;
+}
+
 // ── Group cost ────────────────────────────────────────────────────────────────────────────────
 
 namespace {

@@ -280,4 +280,8 @@ bool isGlare(const model::GhostParameters& ghost, cv::Size image_size);
 model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double intensity_limit,
                                  bool glare);
 
+// Every parameter's fitBounds, in vector order, for a ghost of `cost`'s group seeded as `seed`
+// (glare or not as the seed is): the bounds the solvers keep it within.
+std::vector<model::ParameterBounds> fitBounds(const GroupCost& cost, const model::GhostParameters& seed);
+
 }  // namespace flarekit::fit

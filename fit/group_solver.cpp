@@ -55,17 +55,21 @@ double since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-std::vector<std::vector<double>> clampedSeeds(const GroupCost& cost,
-                                              std::span<const model::GhostParameters> seeds,
-                                              cv::Size size) {
+// Each seed's fit bounds (fit/cost.h fitBounds), in the seeds' order.
+using GroupBounds = std::vector<std::vector<model::ParameterBounds>>;
+GroupBounds boundsOf(const GroupCost& cost, std::span<const model::GhostParameters> seeds) {
+  GroupBounds bounds;
+  for (const auto& s : seeds) bounds.push_back(fitBounds(cost, s));
+  return bounds;
+}
+
+// The seeds as parameter blocks, within their bounds.
+std::vector<std::vector<double>> clampedSeeds(std::span<const model::GhostParameters> seeds,
+                                              const GroupBounds& bounds) {
   std::vector<std::vector<double>> blocks;
-  for (const auto& s : seeds) {
-    auto v = model::toParameterVector(model::clampToBounds(s));
-    const bool glare = isGlare(s, size);
-    for (size_t k = 0; k < v.size(); ++k) {
-      const auto b = fitBounds(static_cast<int>(k), s.channels, size, cost.intensityLimit(), glare);
-      v[k] = std::clamp(v[k], b.lower, b.upper);
-    }
+  for (size_t g = 0; g < seeds.size(); ++g) {
+    auto v = model::toParameterVector(model::clampToBounds(seeds[g]));
+    for (size_t k = 0; k < v.size(); ++k) v[k] = std::clamp(v[k], bounds[g][k].lower, bounds[g][k].upper);
     blocks.push_back(std::move(v));
   }
   return blocks;
@@ -190,11 +194,12 @@ class RelativeReductionTolerance : public ceres::IterationCallback {
 };
 
 GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameters> seeds,
-                          const SolverOptions& options, cv::Size size) {
+                          const SolverOptions& options) {
   const auto t0 = Clock::now();
   const long long evaluations0 = cost.evaluations();
   GroupFitResult result;
-  auto blocks = clampedSeeds(cost, seeds, size);
+  const GroupBounds bounds = boundsOf(cost, seeds);
+  auto blocks = clampedSeeds(seeds, bounds);
   const int channels = cost.channels();
   if (cost.samples().empty()) {
     for (const auto& b : blocks) result.ghosts.push_back(model::fromParameterVector(b, channels));
@@ -223,15 +228,12 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   // held (an active set) lowered those costs, but over λ × 0.99 / 1 / 1.01 of the 640×427 captures
   // the median PSNR fell (Heliar 26.1 → 24.2 dB, Tessar 23.6 → 22.9 dB). Freed, that veil's fits
   // jumped from frame to frame (15.4, 15.6, 15.8°: centre x 170, 121, 166 px).
-  for (size_t g = 0; g < blocks.size(); ++g) {
-    const bool glare = isGlare(seeds[g], size);
+  for (size_t g = 0; g < blocks.size(); ++g)
     for (size_t k = 0; k < blocks[g].size(); ++k) {
-      const auto b = fitBounds(static_cast<int>(k), channels, size, cost.intensityLimit(), glare);
-      problem.SetParameterLowerBound(pointers[g], static_cast<int>(k), b.lower);
-      if (b.upper < model::kUnbounded)
-        problem.SetParameterUpperBound(pointers[g], static_cast<int>(k), b.upper);
+      problem.SetParameterLowerBound(pointers[g], static_cast<int>(k), bounds[g][k].lower);
+      if (bounds[g][k].upper < model::kUnbounded)
+        problem.SetParameterUpperBound(pointers[g], static_cast<int>(k), bounds[g][k].upper);
     }
-  }
   ceres::Solver::Options so;
   so.minimizer_type = ceres::TRUST_REGION;
   so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
@@ -272,11 +274,12 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
 }
 
 GroupFitResult solveWalchGd(GroupCost& cost, std::span<const model::GhostParameters> seeds,
-                            const SolverOptions& options, cv::Size size) {
+                            const SolverOptions& options) {
   const auto t0 = Clock::now();
   const long long evaluations0 = cost.evaluations();
   GroupFitResult result;
-  auto blocks = clampedSeeds(cost, seeds, size);
+  const GroupBounds bounds = boundsOf(cost, seeds);
+  auto blocks = clampedSeeds(seeds, bounds);
   const int channels = cost.channels();
   const int n = cost.parametersPerGhost();
   auto evaluate = [&] {
@@ -297,9 +300,8 @@ GroupFitResult solveWalchGd(GroupCost& cost, std::span<const model::GhostParamet
     bool improved = false;
     // Fixed order, shape before shade: parameter index order is shape (Mx..Cr) then intensity.
     for (size_t g = 0; g < blocks.size(); ++g) {
-      const bool glare = isGlare(seeds[g], size);
       for (int k = 0; k < n; ++k) {
-        const auto b = fitBounds(k, channels, size, cost.intensityLimit(), glare);
+        const model::ParameterBounds& b = bounds[g][k];
         const double h = learning_rate * parameterStep(k, channels, cost.scale());
         const double q = blocks[g][k];
         const double plus = std::min(q + h, b.upper), minus = std::max(q - h, b.lower);
@@ -393,9 +395,8 @@ GroupFitResult solveGroup(GroupCost& cost, std::span<const model::GhostParameter
                           const SolverOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument("SolverOptions: " + error);
-  const cv::Size size = cost.imageSize();
-  return options.optimizer == Optimizer::kCeres ? solveCeres(cost, seeds, options, size)
-                                                : solveWalchGd(cost, seeds, options, size);
+  return options.optimizer == Optimizer::kCeres ? solveCeres(cost, seeds, options)
+                                                : solveWalchGd(cost, seeds, options);
 }
 
 }  // namespace flarekit::fit

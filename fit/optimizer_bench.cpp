@@ -31,12 +31,9 @@ CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& seed,
   }
   end.stalled = end.path_costs[1] < end.path_costs[0];
   const auto names = model::parameterNames(ceres_end.channels);
-  const bool glare = isGlare(seed, cost.imageSize());
-  for (size_t k = 0; k < a.size(); ++k) {
-    const auto bounds = fitBounds(static_cast<int>(k), ceres_end.channels, cost.imageSize(),
-                                  cost.intensityLimit(), glare);
-    if (a[k] <= bounds.lower || a[k] >= bounds.upper) end.on_bounds.push_back(names[k]);
-  }
+  const auto bounds = fitBounds(cost, seed);
+  for (size_t k = 0; k < a.size(); ++k)
+    if (a[k] <= bounds[k].lower || a[k] >= bounds[k].upper) end.on_bounds.push_back(names[k]);
   return end;
 }
 
