@@ -252,9 +252,10 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   // fits in 58–66 s instead of 67–81 s (Heliar) and 62–64 s instead of 71–77 s (Tessar); mean
   // recall 64.8 → 75.4 % (Heliar) and 52.2 → 54.4 % (Tessar), precision 85.6 → 87.0 % and
   // 84.5 → 73.9 %, PSNR 24.6 → 24.1 dB and 23.1 → 23.3 dB, centroid error 7.4 → 9.4 px and
-  // 14.1 → 11.1 px; Heliar held out (--holdout odd) 23.1 → 22.8 dB. Without the line search (its step count 0) a trial was cheaper still, but on
-  // bounds the projected steps stalled: `bench fit`'s two separate ghosts ended at cost 5.8
-  // against the gradient descent's 2.5, with Fi, Ei and Eo on their bounds.
+  // 14.1 → 11.1 px; Heliar held out (--holdout odd) 23.1 → 22.8 dB. Without the line search (its
+  // step count 0) a trial was cheaper still, but on bounds the projected steps stalled: `bench
+  // fit`'s two separate ghosts ended at cost 5.8 against the gradient descent's 2.5, with Fi, Ei
+  // and Eo on their bounds.
   so.line_search_interpolation_type = ceres::QUADRATIC;
   so.max_num_iterations = options.max_iterations;
   // Only a candidate of exactly the current cost ends the solve in Ceres; the tolerance is
