@@ -107,9 +107,12 @@ bool EvaluationOptions::IsValid(std::string* error) const {
 double medianOf(std::vector<double> v) {
   v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }), v.end());
   if (v.empty()) return kNaN;
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  // Selection, not a sort: the fitter takes the median of every candidate blob's pixels (a
+  // frame-filling glare's are 10⁵), and sorting them was 2 % of a capture fit's time.
+  const size_t n = v.size(), middle = n / 2;
+  std::nth_element(v.begin(), v.begin() + middle, v.end());
+  if (n % 2) return v[middle];
+  return 0.5 * (*std::max_element(v.begin(), v.begin() + middle) + v[middle]);
 }
 
 double FrameEvaluation::medianCentroidErrorPx() const {

@@ -133,5 +133,15 @@ TEST(EvaluateModel, NoiseFloorIsTheBackgroundsNotTheLightsShotNoise) {
   EXPECT_EQ(ev.true_ghosts_found, 1);
 }
 
+TEST(MedianOf, MiddleValueOrMeanOfTheTwoMiddleOnesOfTheFiniteValues) {
+  EXPECT_EQ(medianOf({5, 1, 4, 2, 3}), 3);
+  EXPECT_EQ(medianOf({7, 1, 4, 2}), 3);  // (2 + 4) / 2
+  const double inf = std::numeric_limits<double>::infinity(), nan = std::nan("");
+  EXPECT_EQ(medianOf({nan, 10, -inf, 30, 20, inf}), 20);
+  EXPECT_EQ(medianOf({2, 2, 9, 2}), 2);
+  EXPECT_TRUE(std::isnan(medianOf({})));
+  EXPECT_TRUE(std::isnan(medianOf({nan, inf})));
+}
+
 }  // namespace
 }  // namespace flarekit::fit
