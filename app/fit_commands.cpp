@@ -1,12 +1,14 @@
 // flarekit fit, flarekit fit-eval, flarekit bench fit: parse options, call fit/.
 #include <iostream>
 #include <memory>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 #include <tbb/global_control.h>
 
 #include "app/commands.h"
 #include "common/atomic_file.h"
+#include "common/config.h"
 #include "common/error.h"
 #include "common/log.h"
 #include "fit/evaluation.h"
@@ -80,7 +82,7 @@ void registerFit(CLI::App& app) {
   cmd->add_option("--optimizer", o->optimizer, "ceres (Levenberg–Marquardt, default) or walch-gd (the paper's gradient descent)");
   cmd->add_option("--degree", o->degree, "Polynomial degree per parameter, or auto (1–4 by held-out error); default 2");
   cmd->add_option("--holdout", o->holdout, "odd: fit on every other frame only (evaluate the others with fit-eval --frames odd)");
-  cmd->add_option("--report", o->report, "Folder for per-ghost tracks, residuals and contact sheets");
+  cmd->add_option("--report", o->report, "Folder for per-ghost tracks, residuals, contact sheets and the frames' own fits (frame_fits.json)");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   cmd->add_option("--edge-weight", o->edge_weight, "λ, the edge term's weight (default 1)");
   cmd->add_option("--shape-prior", o->shape_prior,
@@ -141,7 +143,9 @@ void registerFitEval(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "fit-eval", "Compare a fitted model with a capture and, where truth/ exists, with the ground "
                   "truth: PSNR, centroid errors, detection recall and precision");
-  cmd->add_option("MODEL", o->model, "Model file (model.json)")->required();
+  cmd->add_option("MODEL", o->model,
+                  "Model file (model.json), or the per-frame fits of a fit's report (REPORT/frame_fits.json)")
+      ->required();
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder, or EXR files / folders")->required();
   cmd->add_option("--frames", o->frames, "all (default) or odd (the frames --holdout odd left out)");
   cmd->add_flag("--json", o->json, "Print one JSON object");
@@ -151,18 +155,32 @@ void registerFitEval(CLI::App& app) {
     if (o->frames != "all" && o->frames != "odd")
       throw InputError("--frames: expected all or odd, got \"" + o->frames + "\"");
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::max(1, o->threads));
-    const model::FlareModel m = model::FlareModel::load(o->model);
+    // A flare model, or the per-frame fits a fit's report holds (fit/frame_fits.h).
+    const ConfigNode root = loadJsonFile(o->model);
+    const bool frame_fits = root.has("format") && root["format"].json() == fit::kFrameFitsFormat;
+    std::optional<model::FlareModel> m;
+    std::optional<fit::FrameFits> fits;
+    if (frame_fits)
+      fits = fit::FrameFits::parse(root.json().dump(), o->model);
+    else
+      m = model::FlareModel::parse(root.json().dump(), o->model);
+    const cv::Size size = m ? m->capture.image_size : fits->image_size;
+    const int channels = m ? m->channels : fits->channels;
     fit::FrameStack stack = loadStack(o->stack);
-    if (m.capture.image_size != stack.size)
-      throw InputError(o->model, "model is for " + std::to_string(m.capture.image_size.width) + "x" +
-                                     std::to_string(m.capture.image_size.height) + " frames, the capture's are " +
-                                     std::to_string(stack.size.width) + "x" + std::to_string(stack.size.height));
-    if (m.channels != stack.channels)
-      throw InputError(o->model, "model has " + std::to_string(m.channels) + " channel(s), the capture " +
+    if (size != stack.size)
+      throw InputError(o->model, "fitted to " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+                                     " frames, the capture's are " + std::to_string(stack.size.width) + "x" +
+                                     std::to_string(stack.size.height));
+    if (channels != stack.channels)
+      throw InputError(o->model, "has " + std::to_string(channels) + " channel(s), the capture " +
                                      std::to_string(stack.channels));
     fit::EvaluationOptions options;
     options.odd_frames_only = o->frames == "odd";
-    const fit::Evaluation ev = fit::evaluateModel(m, stack, options);
+    const fit::Evaluation ev =
+        m ? fit::evaluateModel(*m, stack, options) : fit::evaluateFrameFits(*fits, stack, options);
+    if (ev.frames.empty())
+      throw InputError(o->model, "none of the capture's frames" + std::string(options.odd_frames_only ? " (odd)" : "") +
+                                     " was fitted: nothing to evaluate");
     if (o->json)
       std::cout << ev.toJson().dump(2) << "\n";
     else

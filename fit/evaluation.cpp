@@ -121,8 +121,8 @@ double FrameEvaluation::medianCentroidErrorPx() const {
   return medianOf(errors);
 }
 
-Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
-                         const EvaluationOptions& options) {
+Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const FrameStack& stack,
+                          const EvaluationOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument("EvaluationOptions: " + error);
   Evaluation ev;
@@ -134,10 +134,14 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
     progress.advance();
     if (options.odd_frames_only && i % 2 == 0) continue;
     const Frame& f = stack.frames[i];
+    const std::optional<std::vector<model::GhostAtAngle>> ghosts = ghosts_at(f.angle_deg);
+    if (!ghosts) continue;
     FrameEvaluation fe;
     fe.angle_deg = f.angle_deg;
-    const cv::Mat flare_model = m.render(f.angle_deg, 0, stack.size);
-    const cv::Mat model_lum = luminance(flare_model);
+    model::RenderOptions render;
+    std::vector<model::GhostParameters> all;
+    for (const auto& g : *ghosts) all.push_back(g.parameters);
+    const cv::Mat model_lum = luminance(model::renderGhosts(all, stack.size, channels, render));
     const cv::Mat frame_lum = luminance(f.image);
     cv::Mat truth_flare;
     std::vector<GhostTruth> truth;
@@ -163,14 +167,13 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
     }
     // Model ghosts, one by one.
     std::vector<Blob> model_blobs;
-    model::RenderOptions render;
-    for (const auto& g : m.ghostsAt(f.angle_deg)) {
+    for (const auto& g : *ghosts) {
       const cv::Rect box = model::ghostPixelBounds(g.parameters) & image;
       Blob b;
       b.id = g.id;
       if (!box.empty()) {
         std::vector<model::GhostParameters> one = {g.parameters};
-        b = describe(luminance(model::renderGhosts(one, box, m.channels, render)), box.tl());
+        b = describe(luminance(model::renderGhosts(one, box, channels, render)), box.tl());
         b.id = g.id;
       }
       if (b.present) model_blobs.push_back(b);
@@ -259,6 +262,22 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
   ev.recall = ev.true_ghosts_visible ? double(ev.true_ghosts_found) / ev.true_ghosts_visible : kNaN;
   ev.precision = ev.model_ghosts ? double(ev.model_ghosts_matched) / ev.model_ghosts : kNaN;
   return ev;
+}
+
+Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
+                         const EvaluationOptions& options) {
+  return evaluateGhosts([&](double angle_deg) { return std::optional(m.ghostsAt(angle_deg)); }, m.channels,
+                        stack, options);
+}
+
+Evaluation evaluateFrameFits(const FrameFits& fits, const FrameStack& stack, const EvaluationOptions& options) {
+  return evaluateGhosts(
+      [&](double angle_deg) -> std::optional<std::vector<model::GhostAtAngle>> {
+        const FrameFits::FittedFrame* frame = fits.at(angle_deg);
+        if (!frame) return std::nullopt;
+        return frame->ghosts;
+      },
+      fits.channels, stack, options);
 }
 
 namespace {

@@ -1,6 +1,7 @@
 #pragma once
-// Measuring a fitted flare model against a capture and, for simulated captures, against the
-// ground truth under truth/ (issue 6, `flarekit fit-eval`):
+// Measuring a fitted flare model, or the per-frame fits it was made from (fit/frame_fits.h),
+// against a capture and, for simulated captures, against the ground truth under truth/ (issue 6,
+// `flarekit fit-eval`):
 //
 //  - PSNR of the model against the noise-free flare (the sum of the per-ghost truth layers) over
 //    the flare region: the pixels where that flare exceeds the frame's noise σ and the frame is
@@ -19,6 +20,7 @@
 // noise from neighbour differences (fit/cost.h estimatePixelNoiseSigma: frame-filling veils do
 // not inflate it).
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -26,6 +28,7 @@
 #include <nlohmann/json_fwd.hpp>
 #include <opencv2/core.hpp>
 
+#include "fit/frame_fits.h"
 #include "fit/frames.h"
 #include "model/flare_model.h"
 
@@ -85,8 +88,17 @@ struct Evaluation {
   std::string BriefReport() const;
 };
 
+// The ghosts to measure in the frame at `angle_deg`, or nullopt for a frame to leave out.
+using GhostsAtAngle = std::function<std::optional<std::vector<model::GhostAtAngle>>(double angle_deg)>;
+Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const FrameStack& stack,
+                          const EvaluationOptions& options = {});
+
+// The model's ghosts (its polynomials) in every frame (frames outside every ghost's range: none).
 Evaluation evaluateModel(const model::FlareModel& model, const FrameStack& stack,
                          const EvaluationOptions& options = {});
+// The per-frame fits in the frames that were fitted; the others are left out.
+Evaluation evaluateFrameFits(const FrameFits& fits, const FrameStack& stack,
+                             const EvaluationOptions& options = {});
 
 // Median of the finite values (NaN when none).
 double medianOf(std::vector<double> values);

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "common/error.h"
 #include "common/exr.h"
 #include "common/testing.h"
 #include "model/model_renderer.h"
@@ -131,6 +132,77 @@ TEST(EvaluateModel, NoiseFloorIsTheBackgroundsNotTheLightsShotNoise) {
   EXPECT_NEAR(ev.frames[0].noise_sigma, 1e-4, 0.2e-4);
   EXPECT_EQ(ev.true_ghosts_visible, 1);
   EXPECT_EQ(ev.true_ghosts_found, 1);
+}
+
+TEST(EvaluateFrameFits, MeasuresTheFittedFramesAndLeavesTheOthersOut) {
+  TempDir dir;
+  const model::GhostParameters g = disc(100, 65, 20, 1e-3);
+  const cv::Mat ghost = render(g);
+  FrameStack stack = stackOf(dir, ghost, ghost, ghost);
+  // A second frame at 0.7° that was not fitted.
+  stack.frames.push_back(stack.frames[0]);
+  stack.frames[1].angle_deg = 0.7;
+  FrameFits fits;
+  fits.image_size = kSize;
+  fits.frames.push_back({0.5, {{4, g}}});
+  const auto ev = evaluateFrameFits(fits, stack);
+  ASSERT_EQ(ev.frames.size(), 1u);
+  EXPECT_DOUBLE_EQ(ev.frames[0].angle_deg, 0.5);
+  EXPECT_EQ(ev.true_ghosts_found, 1);
+  EXPECT_DOUBLE_EQ(ev.precision, 1);
+  EXPECT_LT(ev.median_centroid_error_px, 1e-6);
+  EXPECT_GT(ev.median_psnr_db, 100);  // the fit is the truth
+  EXPECT_EQ(ev.frames[0].matched[0].model_id, 4);
+  // The fit 30 px off: found by neither the gate nor the PSNR.
+  fits.frames[0].ghosts[0].parameters.center_x = 70;
+  const auto off = evaluateFrameFits(fits, stack);
+  EXPECT_EQ(off.true_ghosts_found, 0);
+  EXPECT_LT(off.median_psnr_db, 10);
+}
+
+TEST(FrameFits, SavesAndLoadsEveryParameterExactly) {
+  TempDir dir;
+  FrameFits fits;
+  fits.image_size = kSize;
+  fits.channels = 1;
+  model::GhostParameters g = disc(100.125, 65.1, 20.3, 1e-3 / 3);
+  g.inside_exponent = 2.5;
+  fits.frames.push_back({0.1, {{2, g}, {5, disc(10, 20, 3, 0.5)}}});
+  fits.frames.push_back({0.30000000000000004, {}});
+  fits.save(dir / "frame_fits.json");
+  const FrameFits back = FrameFits::load(dir / "frame_fits.json");
+  EXPECT_EQ(back.image_size, kSize);
+  ASSERT_EQ(back.frames.size(), 2u);
+  ASSERT_EQ(back.frames[0].ghosts.size(), 2u);
+  EXPECT_EQ(back.frames[0].ghosts[1].id, 5);
+  EXPECT_EQ(model::toParameterVector(back.frames[0].ghosts[0].parameters), model::toParameterVector(g));
+  ASSERT_NE(back.at(0.30000000000000004), nullptr);
+  EXPECT_EQ(back.at(0.2), nullptr);
+}
+
+TEST(FrameFits, ABadFileNamesTheFileAndTheKey) {
+  const std::string head =
+      R"({"format": "flarekit.frame-fits", "version": 1, "image_width": 200, "image_height": 130, "channels": 1, )";
+  auto error = [&](const std::string& frames) {
+    try {
+      FrameFits::parse(head + R"("frames": )" + frames + "}", "fits.json");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  nlohmann::json params;
+  for (const auto& name : model::parameterNames(1)) params[name] = 1.0;
+  params["Cl"] = 0.5;
+  params["Cr"] = 0.5;
+  const std::string good = nlohmann::json({{"id", 1}, {"parameters", params}}).dump();
+  EXPECT_EQ(error(R"([{"angle_deg": 1, "ghosts": [)" + good + "]}]"), "no error");
+  EXPECT_NE(error(R"([{"angle_deg": 1, "ghosts": []}, {"angle_deg": 1, "ghosts": []}])").find("fits.json: frames[1].angle_deg"),
+            std::string::npos);
+  params["L"] = -3;  // a negative half-width
+  const std::string bad = nlohmann::json({{"id", 1}, {"parameters", params}}).dump();
+  EXPECT_NE(error(R"([{"angle_deg": 1, "ghosts": [)" + bad + "]}]").find("fits.json: frames[0].ghosts[0].parameters"),
+            std::string::npos);
 }
 
 TEST(MedianOf, MiddleValueOrMeanOfTheTwoMiddleOnesOfTheFiniteValues) {

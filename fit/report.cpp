@@ -109,6 +109,7 @@ void writeFitReport(const fs::path& dir, const FitResult& result, const FrameSta
   }
   summary["ghost_tracks"] = ghosts;
   writeJsonFile(dir / "summary.json", summary);
+  FrameFits::fromResult(result, stack.size, stack.channels).save(dir / "frame_fits.json");
 
   if (options.contact_sheets > 0 && !result.frames.empty()) {
     const int n = static_cast<int>(result.frames.size());

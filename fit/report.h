@@ -4,6 +4,8 @@
 //                               how often the model could not describe it (caustics, folds)
 //   DIR/ghost_<id>.csv          the ghost's track: angle, every parameter, residual RMS, peak,
 //                               unexplained flag, per fitted frame
+//   DIR/frame_fits.json         every frame's fits (fit/frame_fits.h), which fit-eval measures
+//                               like a model
 //   DIR/contact_<angle>.png     for sampled frames: capture | model | |residual|, on one shared
 //                               logarithmic scale (decades from the noise floor to the peak)
 // All files are written atomically.
@@ -11,6 +13,7 @@
 #include <filesystem>
 
 #include "fit/fit_capture.h"
+#include "fit/frame_fits.h"
 #include "fit/frames.h"
 
 namespace flarekit::fit {

@@ -111,6 +111,15 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
   EXPECT_GE(j["precision"].get<double>(), 0.95);
   EXPECT_GE(j["median_psnr_db"].get<double>(), 32);
   EXPECT_LE(j["median_centroid_error_px"].get<double>(), 0.5);
+  // The frames' own fits, which the report keeps, measure as the model does on every frame.
+  auto frames = runFlarekit({"-q", "fit-eval", (dir / "report" / "frame_fits.json").string(),
+                             (dir / "capture").string(), "--json"});
+  ASSERT_EQ(frames.exit_code, 0) << frames.err;
+  const auto f = nlohmann::json::parse(frames.out);
+  EXPECT_EQ(f["frames_evaluated"].get<int>(), 12);
+  EXPECT_GE(f["recall"].get<double>(), 0.95) << frames.out;
+  EXPECT_GE(f["median_psnr_db"].get<double>(), 32);
+  EXPECT_LE(f["median_centroid_error_px"].get<double>(), 0.5);
 }
 
 // The same frames give the same model on any machine: five frames of the committed Heliar capture
@@ -141,13 +150,20 @@ TEST(CliFit, HeldOutFramesThroughThePolynomials) {
   TempDir dir;
   writeCapture(dir / "capture", 12);
   const std::string model = (dir / "model.json").string();
-  auto fit = runFlarekit({"-q", "fit", (dir / "capture").string(), "--out", model, "--holdout", "odd"});
+  auto fit = runFlarekit({"-q", "fit", (dir / "capture").string(), "--out", model, "--holdout", "odd",
+                          "--report", (dir / "report").string()});
   ASSERT_EQ(fit.exit_code, 0) << fit.err;
   auto eval = runFlarekit({"-q", "fit-eval", model, (dir / "capture").string(), "--frames", "odd", "--json"});
   ASSERT_EQ(eval.exit_code, 0) << eval.err;
   const auto j = nlohmann::json::parse(eval.out);
   EXPECT_EQ(j["frames_evaluated"].get<int>(), 6);
   EXPECT_GE(j["median_psnr_db"].get<double>(), 30) << eval.out;
+  // The held-out frames have no fits of their own: one line, exit 2.
+  const std::string fits = (dir / "report" / "frame_fits.json").string();
+  auto none = runFlarekit({"-q", "fit-eval", fits, (dir / "capture").string(), "--frames", "odd"});
+  EXPECT_EQ(none.exit_code, 2);
+  EXPECT_EQ(lineCount(none.err), 1) << none.err;
+  EXPECT_NE(none.err.find("frame_fits.json"), std::string::npos) << none.err;
 }
 
 // `bench fit` starts both optimizers from the same seed on the same cost and says where each
