@@ -11,6 +11,7 @@
 #include "common/atomic_file.h"
 #include "common/config.h"
 #include "common/image.h"
+#include "model/model_renderer.h"
 
 namespace flarekit::fit {
 namespace fs = std::filesystem;
@@ -40,22 +41,23 @@ cv::Mat logView(const cv::Mat& lum, double lo, double hi) {
 
 }  // namespace
 
-cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& model_image, double noise_sigma) {
-  const cv::Mat c = luminance(capture), m = luminance(model_image);
+cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv::Mat& model_image,
+                     double noise_sigma) {
+  const cv::Mat c = luminance(capture), f = luminance(fits_image), m = luminance(model_image);
   cv::Mat r = cv::abs(c - m);
-  double peak = 0;
-  cv::minMaxLoc(m, nullptr, &peak);
-  double cpeak = 0;
-  cv::minMaxLoc(c, nullptr, &cpeak);
+  double model_peak = 0, fits_peak = 0;
+  cv::minMaxLoc(m, nullptr, &model_peak);
+  cv::minMaxLoc(f, nullptr, &fits_peak);
   // From a fraction of the noise floor to the brightest ghost (the light itself clips).
   const double lo = std::max(0.3 * noise_sigma, 1e-12);
-  const double hi = std::max({peak * 2, lo * 100});
+  const double hi = std::max({2 * std::max(model_peak, fits_peak), lo * 100});
   cv::Mat sheet;
-  cv::hconcat(std::vector<cv::Mat>{logView(c, lo, hi), logView(m, lo, hi), logView(r, lo, hi)}, sheet);
+  cv::hconcat(std::vector<cv::Mat>{logView(c, lo, hi), logView(f, lo, hi), logView(m, lo, hi), logView(r, lo, hi)},
+              sheet);
   const int w = capture.cols;
-  for (int k = 1; k < 3; ++k) cv::line(sheet, {k * w, 0}, {k * w, sheet.rows - 1}, cv::Scalar(0, 0, 255));
-  const char* labels[] = {"capture", "model", "|residual|"};
-  for (int k = 0; k < 3; ++k)
+  for (int k = 1; k < 4; ++k) cv::line(sheet, {k * w, 0}, {k * w, sheet.rows - 1}, cv::Scalar(0, 0, 255));
+  const char* labels[] = {"capture", "frame's fits", "model", "|capture - model|"};
+  for (int k = 0; k < 4; ++k)
     cv::putText(sheet, labels[k], {k * w + 6, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 255, 255), 1);
   return sheet;
 }
@@ -118,9 +120,11 @@ void writeFitReport(const fs::path& dir, const FitResult& result, const FrameSta
       const int i = count == 1 ? 0 : k * (n - 1) / (count - 1);
       const FrameFit& ff = result.frames[i];
       const Frame& f = stack.frames[ff.frame];
-      // Ghosts as the model file has them (polynomials), so the sheet shows what users get.
+      // The ghosts as this frame's fits drew them, and as the model file has them (polynomials):
+      // what users get, and what of it the polynomials lost.
+      const cv::Mat fits_image = model::renderGhosts(ff.ghosts, stack.size, stack.channels);
       const cv::Mat model_image = result.model.render(f.angle_deg, 0, stack.size);
-      cv::Mat sheet = contactSheet(f.image, model_image, ff.noise_sigma);
+      cv::Mat sheet = contactSheet(f.image, fits_image, model_image, ff.noise_sigma);
       std::ostringstream name;
       name << "contact_" << std::fixed << std::setprecision(2) << f.angle_deg << ".png";
       writeImage8(dir / name.str(), sheet);

@@ -6,8 +6,9 @@
 //                               unexplained flag, per fitted frame
 //   DIR/frame_fits.json         every frame's fits (fit/frame_fits.h), which fit-eval measures
 //                               like a model
-//   DIR/contact_<angle>.png     for sampled frames: capture | model | |residual|, on one shared
-//                               logarithmic scale (decades from the noise floor to the peak)
+//   DIR/contact_<angle>.png     for sampled frames: capture | the frame's fits | model |
+//                               |capture − model|, on one shared logarithmic scale (decades from
+//                               the noise floor to the peak)
 // All files are written atomically.
 
 #include <filesystem>
@@ -26,7 +27,8 @@ struct ReportOptions {
 void writeFitReport(const std::filesystem::path& dir, const FitResult& result,
                     const FrameStack& stack, const ReportOptions& options = {});
 
-// The contact-sheet image (8-bit BGR) of one frame: capture | model | |capture − model|.
-cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& model_image, double noise_sigma);
+// The contact-sheet image (8-bit BGR) of one frame: capture | fits | model | |capture − model|.
+cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv::Mat& model_image,
+                     double noise_sigma);
 
 }  // namespace flarekit::fit

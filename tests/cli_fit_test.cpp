@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "common/exr.h"
 #include "common/testing.h"
@@ -104,6 +105,22 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
   EXPECT_GE(summary["seconds_total"].get<double>(), summary["seconds_fitting"].get<double>() +
                                                          summary["seconds_detecting"].get<double>() +
                                                          summary["seconds_modelling"].get<double>());
+  // Each contact sheet shows capture | the frame's fits | model | |capture − model|: on a capture
+  // this well fitted, the fits and the model look alike, and both show ghosts.
+  int sheets = 0;
+  for (const auto& entry : fs::directory_iterator(dir / "report")) {
+    if (entry.path().filename().string().rfind("contact_", 0) != 0) continue;
+    ++sheets;
+    const cv::Mat sheet = cv::imread(entry.path().string(), cv::IMREAD_GRAYSCALE);
+    ASSERT_EQ(sheet.cols, 4 * 200) << entry.path();
+    ASSERT_EQ(sheet.rows, 130);
+    const cv::Mat fits = sheet(cv::Rect(200 + 1, 20, 198, 110)), drawn = sheet(cv::Rect(400 + 1, 20, 198, 110));
+    double brightest = 0;
+    cv::minMaxLoc(fits, nullptr, &brightest);
+    EXPECT_GT(brightest, 100) << entry.path();
+    EXPECT_LT(cv::norm(fits, drawn, cv::NORM_L1) / fits.total(), 10) << entry.path();
+  }
+  EXPECT_GT(sheets, 0);
   auto eval = runFlarekit({"-q", "fit-eval", model, (dir / "capture").string(), "--json"});
   ASSERT_EQ(eval.exit_code, 0) << eval.err;
   const auto j = nlohmann::json::parse(eval.out);
