@@ -13,14 +13,12 @@ FrameFits FrameFits::fromResult(const FitResult& result, cv::Size image_size, in
   FrameFits f;
   f.image_size = image_size;
   f.channels = channels;
-  for (const FrameFit& ff : result.frames) {
+  for (const FrameFit& ff : result.frames) {  // in angle order (FitResult), as at() needs them
     FittedFrame frame;
     frame.angle_deg = ff.angle_deg;
     for (size_t k = 0; k < ff.ghosts.size(); ++k) frame.ghosts.push_back({ff.ghost_ids[k], ff.ghosts[k]});
     f.frames.push_back(std::move(frame));
   }
-  std::sort(f.frames.begin(), f.frames.end(),
-            [](const FittedFrame& a, const FittedFrame& b) { return a.angle_deg < b.angle_deg; });
   return f;
 }
 
