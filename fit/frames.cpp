@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <fstream>
 #include <map>
 #include <regex>
 #include <sstream>
+
+#include <tbb/parallel_for.h>
 
 #include "common/config.h"
 #include "common/error.h"
@@ -39,9 +42,22 @@ void sortAndCheckAngles(std::vector<Frame>& frames) {
 
 // Reads pixels into each frame, checks sizes and channel counts, drops all-black frames.
 void readPixels(FrameStack& stack, const FrameLoadOptions& options) {
+  // Decoding the frames (zlib) is most of loading: in parallel, each into its own frame; a frame
+  // that cannot be read keeps its error, and the checks below go in frame order, so the error
+  // reported is the one a serial loop would have met first.
+  std::vector<std::exception_ptr> failed(stack.frames.size());
+  tbb::parallel_for(size_t{0}, stack.frames.size(), [&](size_t i) {
+    Frame& f = stack.frames[i];
+    try {
+      readFrameImage(f.file, options.layer, f.image, f.valid);
+    } catch (...) {
+      failed[i] = std::current_exception();
+    }
+  });
   std::vector<Frame> kept;
-  for (auto& f : stack.frames) {
-    readFrameImage(f.file, options.layer, f.image, f.valid);
+  for (size_t i = 0; i < stack.frames.size(); ++i) {
+    if (failed[i]) std::rethrow_exception(failed[i]);
+    Frame& f = stack.frames[i];
     if (stack.size.area() == 0) {
       stack.size = f.image.size();
       stack.channels = f.image.channels();
@@ -165,7 +181,7 @@ std::vector<GhostTruth> readGhostTruth(const fs::path& ghosts_file) {
     } catch (const std::exception&) {
       throw InputError(ghosts_file.string(), "layer \"" + l.name + "\" has no ghost id");
     }
-    g.image = l.image.clone();
+    g.image = l.image;  // the layer's own pixels: `exr` goes out of scope
     cv::patchNaNs(g.image, 0);
     out.push_back(std::move(g));
   }
