@@ -165,5 +165,19 @@ TEST(LoadCapture, InconsistentManifestAndMissingFrames) {
   EXPECT_NE(e.find("frame_0002.exr is missing"), std::string::npos) << e;
 }
 
+// Frames are decoded in parallel; the error a user sees is still the first bad frame's, in angle
+// order, however the threads ran.
+TEST(LoadCapture, NamesTheFirstBadFrameWhenSeveralAreBad) {
+  TempDir dir;
+  writeCapture(dir.path(), 3, false);
+  std::ofstream(dir / "frames/frame_0001.exr") << "not an exr";
+  std::ofstream(dir / "frames/frame_0002.exr") << "not an exr either";
+  for (int run = 0; run < 5; ++run) {
+    const std::string e = errorOf([&] { loadCapture(dir.path()); });
+    EXPECT_NE(e.find("frame_0001.exr"), std::string::npos) << e;
+    EXPECT_EQ(e.find("frame_0002.exr"), std::string::npos) << e;
+  }
+}
+
 }  // namespace
 }  // namespace flarekit::fit
