@@ -88,7 +88,8 @@ struct Evaluation {
   std::string BriefReport() const;
 };
 
-// The ghosts to measure in the frame at `angle_deg`, or nullopt for a frame to leave out.
+// The ghosts to measure in the frame at `angle_deg`, or nullopt for a frame to leave out. Frames
+// are evaluated in parallel: it is called from several threads at once.
 using GhostsAtAngle = std::function<std::optional<std::vector<model::GhostAtAngle>>(double angle_deg)>;
 Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const FrameStack& stack,
                           const EvaluationOptions& options = {});
