@@ -24,6 +24,12 @@ struct DetectionOptions {
   double smoothing_px = 2.0;
   // Threshold levels in noise σ of the (unsmoothed) frame, tried from the highest down; a blob
   // is kept at the first level where it is separate from the light's zone. Each > 0.
+  // A level at 10σ between 20 and 6 (where a faint body beside a bright ghost might separate
+  // from the frame-wide 6σ blob: Brendel Tessar ghost 15 at 8°, whose hexagonal body no
+  // candidate takes) did not help. Means over λ × 0.99, 1, 1.01 on the 640×427 captures
+  // (recall / precision / median PSNR / median centroid error), this level set → with 10σ:
+  //   Heliar Tronnier: 71.2 / 86.5 % / 24.0 dB / 8.8 px → 70.6 / 85.7 / 24.0 / 7.9;
+  //   Brendel Tessar:  51.4 / 78.0 / 22.5 / 15.6 → 54.3 / 80.0 / 21.1 / 19.4.
   std::vector<double> levels_sigma = {1000, 100, 20, 6};
   // Smallest blob, pixels (≥ 1).
   int min_area_px = 30;
@@ -66,7 +72,9 @@ struct DetectionOptions {
   // at 0–8° by up to 2× (7.4°: 0.042 against 0.021), where the renderer's falls steadily with θ.
   // (All measured with the fitter of commit fedfafa.) Measured again with that of 6441292, the
   // same way, they still do not: Heliar 64.7 → 67.1 %, 86.0 → 84.4 %, 26.1 → 25.2 dB,
-  // 8.3 → 7.5 px; Tessar 52.9 → 53.7 %, 79.0 → 78.0 %, 23.6 → 23.1 dB, 11.1 → 12.4 px.
+  // 8.3 → 7.5 px; Tessar 52.9 → 53.7 %, 79.0 → 78.0 %, 23.6 → 23.1 dB, 11.1 → 12.4 px. Nor with
+  // that of 484f1fe: Heliar 71.2 → 70.4 %, 86.5 → 86.5 %, 24.0 → 24.7 dB, 8.8 → 9.5 px;
+  // Tessar 51.4 → 53.7 %, 78.0 → 77.2 %, 22.5 → 22.5 dB, 15.6 → 14.9 px.
   bool find_veils = false;
   // Seed veiling glare (detectGlare; fit/cost.h isGlare) where the residual's median over the frame
   // is above glare_sigma noise σ and no glare is modelled yet.
