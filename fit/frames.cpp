@@ -258,7 +258,18 @@ FrameStack loadCapture(const fs::path& folder, const FrameLoadOptions& options) 
     if (auto g = e.find("ghosts_file")) f.ghosts_file = folder / g->string();
     // Newer captures keep the per-ghost layers ("ghost.<id>.*") in the truth file itself.
     if (f.ghosts_file.empty()) f.ghosts_file = f.truth_file;
-    if (f.truth_file.empty() || !fs::exists(f.truth_file) || !fs::exists(f.ghosts_file)) truth = false;
+    if (truth && (f.truth_file.empty() || !fs::exists(f.truth_file) || !fs::exists(f.ghosts_file))) {
+      // Evaluation against the truth needs every frame's: say which is missing rather than
+      // quietly measuring against the frames only.
+      const std::string missing = f.truth_file.empty() ? "frames[" + std::to_string(i) + "] names no truth_file"
+                                  : !fs::exists(f.truth_file) ? f.truth_file.string() + " is missing"
+                                                              : f.ghosts_file.string() + " is missing";
+      const std::string w = manifest_path.string() + ": the capture has ground truth, but " + missing +
+                            "; nothing will be compared with the truth";
+      logWarning(w);
+      stack.warnings.push_back(w);
+      truth = false;
+    }
     stack.frames.push_back(std::move(f));
   }
   stack.has_truth = truth;

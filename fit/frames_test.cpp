@@ -165,6 +165,28 @@ TEST(LoadCapture, InconsistentManifestAndMissingFrames) {
   EXPECT_NE(e.find("frame_0002.exr is missing"), std::string::npos) << e;
 }
 
+// A capture with ground truth whose truth file is missing for one frame is measured without the
+// truth, and the user is told which file is missing.
+TEST(LoadCapture, SaysWhichTruthFileIsMissing) {
+  TempDir dir;
+  writeCapture(dir.path(), 3, false);
+  nlohmann::json m = nlohmann::json::parse(std::ifstream(dir / "manifest.json"));
+  m["truth"] = true;
+  fs::create_directories(dir / "truth");
+  for (int i = 0; i < 3; ++i) {
+    const std::string file = "truth/frame_000" + std::to_string(i) + ".exr";
+    m["frames"][i]["truth_file"] = file;
+    writeFrame(dir / file, blob(0.5), 0.5 * i);
+  }
+  std::ofstream(dir / "manifest.json") << m.dump(2);
+  EXPECT_TRUE(loadCapture(dir.path()).has_truth);
+  fs::remove(dir / "truth/frame_0001.exr");
+  const FrameStack s = loadCapture(dir.path());
+  EXPECT_FALSE(s.has_truth);
+  ASSERT_EQ(s.warnings.size(), 1u);
+  EXPECT_NE(s.warnings[0].find("truth/frame_0001.exr is missing"), std::string::npos) << s.warnings[0];
+}
+
 // Frames are decoded in parallel; the error a user sees is still the first bad frame's, in angle
 // order, however the threads ran.
 TEST(LoadCapture, NamesTheFirstBadFrameWhenSeveralAreBad) {
