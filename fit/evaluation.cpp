@@ -85,10 +85,14 @@ double noiseFloor(const cv::Mat& noise, const cv::Mat& valid) {
   return 1.4826 * median(v);
 }
 
-double psnr(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask, double peak) {
-  if (cv::countNonZero(mask) == 0 || !(peak > 0)) return kNaN;
+// PSNR of `a` against `reference` over `mask`, the peak being the reference's maximum there.
+double psnr(const cv::Mat& a, const cv::Mat& reference, const cv::Mat& mask) {
+  if (cv::countNonZero(mask) == 0) return kNaN;
+  double peak = 0;
+  cv::minMaxLoc(reference, nullptr, &peak, nullptr, nullptr, mask);
+  if (!(peak > 0)) return kNaN;
   cv::Mat d;
-  cv::subtract(a, b, d, cv::noArray(), CV_64F);
+  cv::subtract(a, reference, d, cv::noArray(), CV_64F);
   cv::multiply(d, d, d);
   const double mse = cv::mean(d, mask)[0];
   if (mse <= 0) return 200;
@@ -121,12 +125,7 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
     fe.noise_sigma = estimatePixelNoiseSigma(f.image, f.valid);
   }
   // PSNR against the frame over the model's footprint.
-  {
-    cv::Mat mask = (model_lum > fe.noise_sigma) & (f.valid > 0);
-    double peak = 0;
-    cv::minMaxLoc(frame_lum, nullptr, &peak, nullptr, nullptr, mask);
-    fe.capture_psnr_db = psnr(model_lum, frame_lum, mask, peak);
-  }
+  fe.capture_psnr_db = psnr(model_lum, frame_lum, (model_lum > fe.noise_sigma) & (f.valid > 0));
   // Model ghosts, one by one.
   std::vector<Blob> model_blobs;
   for (const auto& g : ghosts) {
@@ -145,10 +144,7 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
     fe.psnr_db = kNaN;
     return fe;
   }
-  cv::Mat region = (truth_flare > fe.noise_sigma) & (f.valid > 0);
-  double peak = 0;
-  cv::minMaxLoc(truth_flare, nullptr, &peak, nullptr, nullptr, region);
-  fe.psnr_db = psnr(model_lum, truth_flare, region, peak);
+  fe.psnr_db = psnr(model_lum, truth_flare, (truth_flare > fe.noise_sigma) & (f.valid > 0));
   std::vector<Blob> true_blobs;
   for (const auto& g : truth) {
     Blob b = describe(luminance(g.image), {0, 0});
