@@ -243,10 +243,10 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument("EvaluationOptions: " + error);
   const size_t n = stack.frames.size();
-  // Frames are independent and each reads its truth layers (a Heliar frame's are ~100 MB of
-  // deflated EXR): evaluated in parallel (half the time on 2 cores), each into its own slot, then
-  // summed in frame order. A frame that fails keeps its exception; the first in frame order is
-  // rethrown, as a serial loop would have.
+  // Frames are independent, and each decodes its truth layers (Heliar 640×427: 28 ghost layers,
+  // 31 MB a frame): evaluated in parallel (that capture: 52 → 31 s on 2 cores), each into its own
+  // slot, then summed in frame order. A frame that fails keeps its exception; the first in frame
+  // order is rethrown, as a serial loop would have.
   std::vector<std::optional<FrameEvaluation>> evaluated(n);
   std::vector<std::exception_ptr> failed(n);
   Progress progress("fit-eval", static_cast<long long>(n));
