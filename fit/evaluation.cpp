@@ -4,6 +4,7 @@
 #include <cmath>
 #include <exception>
 #include <limits>
+#include <map>
 #include <optional>
 #include <sstream>
 
@@ -281,6 +282,34 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
     ev.model_ghosts_matched += fe->model_ghosts_matched;
     ev.frames.push_back(std::move(*fe));
   }
+  // Per true ghost, over the frames.
+  struct Seen {
+    TrueGhostSummary summary;
+    std::vector<double> radii, missed_peaks;
+  };
+  std::map<int, Seen> seen;
+  for (const auto& fe : ev.frames) {
+    for (const auto& m : fe.matched) {
+      Seen& s = seen[m.true_id];
+      ++s.summary.frames_visible;
+      ++s.summary.frames_found;
+      s.radii.push_back(m.radius_px);
+    }
+    for (const auto& m : fe.missed) {
+      Seen& s = seen[m.id];
+      if (s.missed_peaks.empty()) s.summary.missed_min_deg = fe.angle_deg;
+      s.summary.missed_max_deg = fe.angle_deg;
+      ++s.summary.frames_visible;
+      s.radii.push_back(m.radius_px);
+      s.missed_peaks.push_back(m.peak_sigma);
+    }
+  }
+  for (auto& [id, s] : seen) {
+    s.summary.id = id;
+    s.summary.median_radius_px = medianOf(s.radii);
+    s.summary.missed_median_peak_sigma = medianOf(s.missed_peaks);
+    ev.true_ghosts.push_back(s.summary);
+  }
   ev.median_psnr_db = medianOf(psnrs);
   ev.median_capture_psnr_db = medianOf(capture_psnrs);
   ev.median_centroid_error_px = medianOf(errors);
@@ -361,6 +390,19 @@ nlohmann::json Evaluation::toJson() const {
                   {"unmatched_model_ids", f.unmatched_model_ids}});
   }
   j["frames"] = fs;
+  nlohmann::json ghosts = nlohmann::json::array();
+  for (const auto& g : true_ghosts) {
+    nlohmann::json e = {{"id", g.id},
+                        {"frames_visible", g.frames_visible},
+                        {"frames_found", g.frames_found},
+                        {"median_radius_px", number(g.median_radius_px)},
+                        {"missed_median_peak_sigma", number(g.missed_median_peak_sigma)}};
+    e["missed_range_deg"] = g.frames_found < g.frames_visible
+                                ? nlohmann::json::array({g.missed_min_deg, g.missed_max_deg})
+                                : nlohmann::json(nullptr);
+    ghosts.push_back(e);
+  }
+  j["true_ghosts"] = ghosts;
   return j;
 }
 
@@ -374,6 +416,21 @@ std::string Evaluation::BriefReport() const {
       << "/" << true_ghosts_visible << "), precision " << 100 * precision << " % ("
       << model_ghosts_matched << "/" << model_ghosts << "); ";
   s << "median PSNR vs capture " << median_capture_psnr_db << " dB.";
+  // The ghosts missed most, up to three.
+  std::vector<TrueGhostSummary> missed;
+  for (const auto& g : true_ghosts)
+    if (g.frames_found < g.frames_visible) missed.push_back(g);
+  std::stable_sort(missed.begin(), missed.end(), [](const TrueGhostSummary& a, const TrueGhostSummary& b) {
+    return a.frames_visible - a.frames_found > b.frames_visible - b.frames_found;
+  });
+  if (missed.size() > 3) missed.resize(3);
+  for (size_t i = 0; i < missed.size(); ++i) {
+    const auto& g = missed[i];
+    s << (i == 0 ? " Missed most: ghost " : "; ghost ") << g.id << " in " << g.frames_visible - g.frames_found
+      << " of " << g.frames_visible << " frames (" << g.missed_min_deg << "–" << g.missed_max_deg
+      << "°, median peak " << g.missed_median_peak_sigma << " σ, radius " << g.median_radius_px << " px)";
+  }
+  if (!missed.empty()) s << ".";
   return s.str();
 }
 

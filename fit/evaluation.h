@@ -75,9 +75,22 @@ struct FrameEvaluation {
   std::vector<int> unmatched_model_ids;    // model ghosts without a true ghost
 };
 
+// One true ghost over the evaluated frames: in how many it was visible and found, and where and
+// how bright it was where it was missed (which ghosts a fit loses, at a glance; the per-frame
+// `missed` entries hold the details).
+struct TrueGhostSummary {
+  int id = 0;
+  int frames_visible = 0;
+  int frames_found = 0;
+  double missed_min_deg = 0, missed_max_deg = 0;  // the angles it was missed at (when missed)
+  double missed_median_peak_sigma = 0;            // its median peak there, noise σ (NaN when never missed)
+  double median_radius_px = 0;                    // over the frames it was visible in
+};
+
 struct Evaluation {
   bool has_truth = false;
   std::vector<FrameEvaluation> frames;
+  std::vector<TrueGhostSummary> true_ghosts;  // every ghost visible in some frame, by id
   double median_psnr_db = 0;
   double median_capture_psnr_db = 0;
   double median_centroid_error_px = 0;

@@ -160,6 +160,48 @@ TEST(EvaluateFrameFits, MeasuresTheFittedFramesAndLeavesTheOthersOut) {
   EXPECT_LT(off.median_psnr_db, 10);
 }
 
+TEST(EvaluateFrameFits, SummarisesEachTrueGhostOverTheFrames) {
+  TempDir dir;
+  const model::GhostParameters g = disc(100, 65, 20, 1e-3);
+  const cv::Mat ghost = render(g);
+  // Noise of σ = 1e-5 on the frame: the disc's peak is 100 σ.
+  cv::Mat noise(kSize, CV_32F);
+  cv::RNG(7).fill(noise, cv::RNG::NORMAL, 0, 1e-5);
+  FrameStack stack = stackOf(dir, ghost + noise, ghost, ghost);
+  for (double angle : {0.7, 0.9}) {
+    stack.frames.push_back(stack.frames[0]);
+    stack.frames.back().angle_deg = angle;
+  }
+  // Found at 0.5°; 30 px off, so missed, at 0.7° and 0.9°.
+  model::GhostParameters off = g;
+  off.center_x = 70;
+  FrameFits fits;
+  fits.image_size = kSize;
+  fits.frames = {{0.5, {{4, g}}}, {0.7, {{4, off}}}, {0.9, {{4, off}}}};
+  const auto ev = evaluateFrameFits(fits, stack);
+  ASSERT_EQ(ev.true_ghosts.size(), 1u);
+  const TrueGhostSummary& t = ev.true_ghosts[0];
+  EXPECT_EQ(t.id, 0);
+  EXPECT_EQ(t.frames_visible, 3);
+  EXPECT_EQ(t.frames_found, 1);
+  EXPECT_DOUBLE_EQ(t.missed_min_deg, 0.7);
+  EXPECT_DOUBLE_EQ(t.missed_max_deg, 0.9);
+  EXPECT_NEAR(t.median_radius_px, 20, 1.5);
+  EXPECT_NEAR(t.missed_median_peak_sigma, 100, 10);
+  const nlohmann::json j = ev.toJson()["true_ghosts"][0];
+  EXPECT_EQ(j["frames_found"], 1);
+  EXPECT_DOUBLE_EQ(j["missed_range_deg"][1].get<double>(), 0.9);
+  const std::string brief = ev.BriefReport();
+  EXPECT_NE(brief.find("Missed most: ghost 0 in 2 of 3 frames (0.7–0.9°"), std::string::npos) << brief;
+  // Found everywhere: no range, nothing named as missed.
+  fits.frames = {{0.5, {{4, g}}}, {0.7, {{4, g}}}, {0.9, {{4, g}}}};
+  const auto all = evaluateFrameFits(fits, stack);
+  ASSERT_EQ(all.true_ghosts.size(), 1u);
+  EXPECT_EQ(all.true_ghosts[0].frames_found, 3);
+  EXPECT_TRUE(all.toJson()["true_ghosts"][0]["missed_range_deg"].is_null());
+  EXPECT_EQ(all.BriefReport().find("Missed most"), std::string::npos);
+}
+
 TEST(FrameFits, SavesAndLoadsEveryParameterExactly) {
   TempDir dir;
   FrameFits fits;
