@@ -70,6 +70,14 @@ FrameStack stackOf(const TempDir& dir, const cv::Mat& frame, const cv::Mat& radi
   return s;
 }
 
+// Copies of the stack's first frame (pixels and truth) at further angles.
+void addFramesAt(FrameStack& stack, std::initializer_list<double> angles_deg) {
+  for (double angle : angles_deg) {
+    stack.frames.push_back(stack.frames[0]);
+    stack.frames.back().angle_deg = angle;
+  }
+}
+
 TEST(EvaluateModel, MatchGateFollowsTheGhostsSizeNotACausticsSpike) {
   TempDir dir;
   // A disc of radius 50 with a caustic's bright spike on its rim (2×2 px at 100× the disc): the
@@ -139,9 +147,7 @@ TEST(EvaluateFrameFits, MeasuresTheFittedFramesAndLeavesTheOthersOut) {
   const model::GhostParameters g = disc(100, 65, 20, 1e-3);
   const cv::Mat ghost = render(g);
   FrameStack stack = stackOf(dir, ghost, ghost, ghost);
-  // A second frame at 0.7° that was not fitted.
-  stack.frames.push_back(stack.frames[0]);
-  stack.frames[1].angle_deg = 0.7;
+  addFramesAt(stack, {0.7});  // a second frame, not fitted
   FrameFits fits;
   fits.image_size = kSize;
   fits.frames.push_back({0.5, {{4, g}}});
@@ -168,10 +174,7 @@ TEST(EvaluateFrameFits, SummarisesEachTrueGhostOverTheFrames) {
   cv::Mat noise(kSize, CV_32F);
   cv::RNG(7).fill(noise, cv::RNG::NORMAL, 0, 1e-5);
   FrameStack stack = stackOf(dir, ghost + noise, ghost, ghost);
-  for (double angle : {0.7, 0.9}) {
-    stack.frames.push_back(stack.frames[0]);
-    stack.frames.back().angle_deg = angle;
-  }
+  addFramesAt(stack, {0.7, 0.9});
   // Found at 0.5°; 30 px off, so missed, at 0.7° and 0.9°.
   model::GhostParameters off = g;
   off.center_x = 70;

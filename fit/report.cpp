@@ -11,6 +11,7 @@
 #include "common/atomic_file.h"
 #include "common/config.h"
 #include "common/image.h"
+#include "fit/frame_fits.h"
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {

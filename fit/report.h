@@ -14,7 +14,6 @@
 #include <filesystem>
 
 #include "fit/fit_capture.h"
-#include "fit/frame_fits.h"
 #include "fit/frames.h"
 
 namespace flarekit::fit {
