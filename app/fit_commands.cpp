@@ -188,6 +188,44 @@ void registerFitEval(CLI::App& app) {
   });
 }
 
+void registerFitCeiling(CLI::App& app) {
+  struct Options {
+    StackArgs stack;
+    int every = 10, threads = 2;
+    double edge_weight = -1;
+    bool json = false;
+    std::string sheets;
+  };
+  auto o = std::make_shared<Options>();
+  auto* cmd = app.add_subcommand(
+      "fit-ceiling", "What the ghost model can describe of a simulated capture at best: every true ghost fitted "
+                     "alone to its noise-free truth layer, measured as fit-eval measures a model");
+  cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder with ground truth (truth/)")->required();
+  cmd->add_option("--every", o->every, "Measure every Nth frame (default 10)");
+  cmd->add_option("--edge-weight", o->edge_weight, "λ of the first stage of each fit (default 1, as fit)");
+  cmd->add_option("--sheets", o->sheets,
+                  "Folder for one picture per measured frame: noise-free flare | ceiling | |flare − ceiling|");
+  cmd->add_flag("--json", o->json, "Print one JSON object");
+  cmd->add_option("--threads", o->threads, "Threads (default 2)");
+  addStackOptions(cmd, o->stack);
+  cmd->callback([o] {
+    fit::CeilingOptions options;
+    if (o->every < 1) throw InputError("--every: expected a number ≥ 1, got " + std::to_string(o->every));
+    options.frame_step = o->every;
+    if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
+    std::string error;
+    if (!options.IsValid(&error)) throw InputError(error);
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::max(1, o->threads));
+    const fit::FrameStack stack = loadStack(o->stack);
+    const fit::ModelCeiling ceiling = fit::measureModelCeiling(stack, options);
+    if (!o->sheets.empty()) fit::writeCeilingSheets(o->sheets, ceiling);
+    if (o->json)
+      std::cout << ceiling.toJson().dump(2) << "\n";
+    else
+      std::cout << ceiling.BriefReport() << "\n";
+  });
+}
+
 void registerBenchFit(CLI::App& app) {
   struct Options {
     StackArgs stack;
@@ -225,6 +263,7 @@ void registerFitCommands(CLI::App& app) {
   registerBenchFit(app);
   registerFit(app);
   registerFitEval(app);
+  registerFitCeiling(app);
 }
 
 }  // namespace flarekit::app

@@ -13,10 +13,12 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "common/error.h"
 #include "common/exr.h"
 #include "common/image.h"
 #include "common/progress.h"
 #include "fit/cost.h"
+#include "fit/group_solver.h"
 
 namespace flarekit::fit {
 
@@ -28,6 +30,7 @@ struct Blob {
   cv::Point2d centroid;
   double peak = 0;
   double radius = 0;
+  double sigma_x = 0, sigma_y = 0;  // intensity-weighted standard deviations, pixels
   bool present = false;
 };
 
@@ -57,8 +60,9 @@ Blob describe(const cv::Mat& lum, cv::Point offset) {
   b.peak = peak;
   const double cx = sx / sum, cy = sy / sum;
   b.centroid = {offset.x + cx, offset.y + cy};
-  const double spread = std::max(0.0, sxx / sum - cx * cx) + std::max(0.0, syy / sum - cy * cy);
-  b.radius = std::sqrt(2 * spread);
+  b.sigma_x = std::sqrt(std::max(0.0, sxx / sum - cx * cx));
+  b.sigma_y = std::sqrt(std::max(0.0, syy / sum - cy * cy));
+  b.radius = std::sqrt(2 * (b.sigma_x * b.sigma_x + b.sigma_y * b.sigma_y));
   return b;
 }
 
@@ -100,6 +104,26 @@ double psnr(const cv::Mat& a, const cv::Mat& reference, const cv::Mat& mask) {
   return 10 * std::log10(peak * peak / mse);
 }
 
+// A frame's ground truth as the measures here read it.
+struct FrameTruth {
+  double noise_sigma = 0;          // noiseFloor of frame − noise-free radiance
+  std::vector<GhostTruth> ghosts;  // each ghost's own layer
+  cv::Mat flare;                   // the noise-free flare: the sum of the ghosts' luminance
+};
+
+FrameTruth readFrameTruth(const Frame& f, const cv::Mat& frame_lum) {
+  FrameTruth truth;
+  cv::Mat radiance = readExrLayer(f.truth_file, "");
+  cv::patchNaNs(radiance, 0);
+  cv::Mat noise;
+  cv::subtract(frame_lum, luminance(radiance), noise, cv::noArray(), CV_32F);
+  truth.noise_sigma = noiseFloor(noise, f.valid);
+  truth.ghosts = readGhostTruth(f.ghosts_file);
+  truth.flare = cv::Mat::zeros(frame_lum.size(), CV_32F);
+  for (const auto& g : truth.ghosts) truth.flare += luminance(g.image);
+  return truth;
+}
+
 // One frame's evaluation (evaluateGhosts).
 FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAngle>& ghosts, int channels,
                               const FrameStack& stack, const EvaluationOptions& options) {
@@ -111,17 +135,10 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
   for (const auto& g : ghosts) all.push_back(g.parameters);
   const cv::Mat model_lum = luminance(model::renderGhosts(all, stack.size, channels, render));
   const cv::Mat frame_lum = luminance(f.image);
-  cv::Mat truth_flare;
-  std::vector<GhostTruth> truth;
+  FrameTruth truth;
   if (stack.has_truth) {
-    cv::Mat radiance = readExrLayer(f.truth_file, "");
-    cv::patchNaNs(radiance, 0);
-    cv::Mat noise;
-    cv::subtract(frame_lum, luminance(radiance), noise, cv::noArray(), CV_32F);
-    fe.noise_sigma = noiseFloor(noise, f.valid);
-    truth = readGhostTruth(f.ghosts_file);
-    truth_flare = cv::Mat::zeros(stack.size, CV_32F);
-    for (const auto& g : truth) truth_flare += luminance(g.image);
+    truth = readFrameTruth(f, frame_lum);
+    fe.noise_sigma = truth.noise_sigma;
   } else {
     fe.noise_sigma = estimatePixelNoiseSigma(f.image, f.valid);
   }
@@ -145,9 +162,9 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
     fe.psnr_db = kNaN;
     return fe;
   }
-  fe.psnr_db = psnr(model_lum, truth_flare, (truth_flare > fe.noise_sigma) & (f.valid > 0));
+  fe.psnr_db = psnr(model_lum, truth.flare, (truth.flare > fe.noise_sigma) & (f.valid > 0));
   std::vector<Blob> true_blobs;
-  for (const auto& g : truth) {
+  for (const auto& g : truth.ghosts) {
     Blob b = describe(luminance(g.image), {0, 0});
     b.id = g.id;
     if (b.present) true_blobs.push_back(b);
@@ -209,6 +226,35 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
   return fe;
 }
 
+// `measure(i)` of every frame i of the stack (nullopt: the frame is left out), in frame order.
+// Frames are independent, and each decodes its truth layers (Heliar 640×427: 28 ghost layers,
+// 31 MB a frame): measured in parallel (fit-eval on that capture: 52 → 31 s on 2 cores), each
+// into its own slot. A frame that fails keeps its exception; the first in frame order is
+// rethrown, as a serial loop would have.
+template <class Result, class Measure>
+std::vector<std::optional<Result>> measureFrames(const FrameStack& stack, const char* what, const Measure& measure) {
+  const size_t n = stack.frames.size();
+  std::vector<std::optional<Result>> results(n);
+  std::vector<std::exception_ptr> failed(n);
+  Progress progress(what, static_cast<long long>(n));
+  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+    // Isolated: a thread waiting inside this frame's renders must not start another frame
+    // (each holds its truth layers).
+    tbb::this_task_arena::isolate([&] {
+      try {
+        results[i] = measure(i);
+      } catch (...) {
+        failed[i] = std::current_exception();
+      }
+    });
+    progress.advance();
+  });
+  progress.finish();
+  for (const auto& e : failed)
+    if (e) std::rethrow_exception(e);
+  return results;
+}
+
 }  // namespace
 
 bool EvaluationOptions::IsValid(std::string* error) const {
@@ -243,31 +289,12 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
                           const EvaluationOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument("EvaluationOptions: " + error);
-  const size_t n = stack.frames.size();
-  // Frames are independent, and each decodes its truth layers (Heliar 640×427: 28 ghost layers,
-  // 31 MB a frame): evaluated in parallel (that capture: 52 → 31 s on 2 cores), each into its own
-  // slot, then summed in frame order. A frame that fails keeps its exception; the first in frame
-  // order is rethrown, as a serial loop would have.
-  std::vector<std::optional<FrameEvaluation>> evaluated(n);
-  std::vector<std::exception_ptr> failed(n);
-  Progress progress("fit-eval", static_cast<long long>(n));
-  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
-    // Isolated: a thread waiting inside this frame's renders must not start another frame
-    // (each holds its truth layers).
-    tbb::this_task_arena::isolate([&] {
-      try {
-        if (!(options.odd_frames_only && i % 2 == 0))
-          if (const auto ghosts = ghosts_at(stack.frames[i].angle_deg))
-            evaluated[i] = evaluateFrame(stack.frames[i], *ghosts, channels, stack, options);
-      } catch (...) {
-        failed[i] = std::current_exception();
-      }
-    });
-    progress.advance();
+  auto evaluated = measureFrames<FrameEvaluation>(stack, "fit-eval", [&](size_t i) -> std::optional<FrameEvaluation> {
+    if (options.odd_frames_only && i % 2 == 0) return std::nullopt;
+    const auto ghosts = ghosts_at(stack.frames[i].angle_deg);
+    if (!ghosts) return std::nullopt;
+    return evaluateFrame(stack.frames[i], *ghosts, channels, stack, options);
   });
-  progress.finish();
-  for (const auto& e : failed)
-    if (e) std::rethrow_exception(e);
   Evaluation ev;
   ev.has_truth = stack.has_truth;
   std::vector<double> psnrs, capture_psnrs, errors;
@@ -431,6 +458,221 @@ std::string Evaluation::BriefReport() const {
       << "°, median peak " << g.missed_median_peak_sigma << " σ, radius " << g.median_radius_px << " px)";
   }
   if (!missed.empty()) s << ".";
+  return s.str();
+}
+
+// ── The model's ceiling ──────────────────────────────────────────────────────────────────────────
+
+bool CeilingOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (frame_step < 1) return fail("frame_step must be ≥ 1");
+  if (!(fit_factor >= 0)) return fail("fit_factor must be ≥ 0");
+  if (!(visible_factor > 0)) return fail("visible_factor must be > 0");
+  if (max_iterations < 1) return fail("max_iterations must be ≥ 1");
+  return cost.IsValid(error);
+}
+
+namespace {
+
+// The starts for a true ghost's ceiling fit, from its own layer (flat: Ib = Ii = the layer's mean
+// over the start's area, per channel):
+//  - the ellipse of its second moments (half-axes 2σ, exact for a uniform ellipse) at its
+//    centroid, with a soft edge (Fo 3 px, Fi 0.3 of its size) and a sharp one (Fo 0.5 px, Fi 0.1);
+//  - that ellipse shrunk to 0.85, soft: a ghost with a bright rim has moments that overstate it,
+//    and from an outline beyond its true one Levenberg–Marquardt settles into a flat disc whose
+//    border value is 0 (a model-shaped ghost with a rim twice its inside: 14.9 dB from 1.2× its
+//    size, exact from 0.8–1.1×);
+//  - the box of its pixels above 5 % of its peak, sharp: ghosts cut by the frame or an aperture.
+std::vector<model::GhostParameters> ceilingStarts(const cv::Mat& image, const cv::Mat& lum, const Blob& b) {
+  const int channels = image.channels();
+  const cv::Scalar sum = cv::sum(image);
+  auto start = [&](double x, double y, double l, double r, double h, double fo, double fi_fraction) {
+    model::GhostParameters g;
+    g.channels = channels;
+    g.center_x = x;
+    g.center_y = y;
+    g.left = std::max(1.0, l);
+    g.right = std::max(1.0, r);
+    g.height = std::max(1.0, h);
+    g.outside_falloff = fo;
+    g.inside_falloff = fi_fraction * std::max({g.left, g.right, g.height});
+    const double area = M_PI * 0.5 * (g.left + g.right) * g.height;
+    for (int c = 0; c < channels; ++c) g.border[c] = g.inside[c] = std::max(0.0, sum[c]) / area;
+    return g;
+  };
+  const double a = 2 * b.sigma_x, h = 2 * b.sigma_y;
+  const cv::Rect e = cv::boundingRect(lum > 0.05 * b.peak);
+  const double box_x = std::clamp(b.centroid.x, e.x + 1.0, e.x + e.width - 1.0);
+  return {start(b.centroid.x, b.centroid.y, a, a, h, 3, 0.3),
+          start(b.centroid.x, b.centroid.y, a, a, h, 0.5, 0.1),
+          start(b.centroid.x, b.centroid.y, 0.85 * a, 0.85 * a, 0.85 * h, 3, 0.3),
+          start(box_x, e.y + 0.5 * e.height, box_x - e.x, e.x + e.width - box_x, 0.5 * e.height, 0.5, 0.1)};
+}
+
+// One true ghost's best fit (measureModelCeiling), and its luminance over the frame.
+CeilingGhost fitTrueGhost(const GhostTruth& truth, const cv::Mat& lum, const Blob& b, double noise_sigma,
+                          const cv::Mat& psnr_mask, const CeilingOptions& options, cv::Mat& best_lum) {
+  CeilingGhost best;
+  best.id = truth.id;
+  best.peak_sigma = noise_sigma > 0 ? b.peak / noise_sigma : kNaN;
+  best.radius_px = b.radius;
+  best.psnr_db = -std::numeric_limits<double>::infinity();
+  CostOptions mse = options.cost;
+  mse.edge_weight = 0;
+  const EdgeFilter edge(options.cost), mse_edge(mse);
+  const cv::Mat all_valid(lum.size(), CV_8U, cv::Scalar(255));  // the truth has no saturation
+  const FramePyramid pyramid(truth.image, all_valid, edge, noise_sigma);
+  const FramePyramid mse_pyramid(truth.image, all_valid, mse_edge, noise_sigma);
+  SolverOptions solver;
+  solver.max_iterations = options.max_iterations;
+  for (const auto& start : ceilingStarts(truth.image, lum, b)) {
+    const std::vector<model::GhostParameters> one = {start};
+    GroupCost cost(pyramid, edge, {}, one, options.cost);
+    const GroupFitResult with_edges = solveGroup(cost, one, solver);
+    GroupCost mse_cost(mse_pyramid, mse_edge, {}, with_edges.ghosts, mse);
+    const GroupFitResult plain = solveGroup(mse_cost, with_edges.ghosts, solver);
+    for (const auto* fit : {&with_edges, &plain}) {
+      cv::Mat fitted = luminance(model::renderGhosts(fit->ghosts, lum.size(), truth.image.channels()));
+      const double p = psnr(fitted, lum, psnr_mask);
+      if (!(p > best.psnr_db)) continue;
+      best.psnr_db = p;
+      best.parameters = fit->ghosts[0];
+      best.centroid_error_px = cv::norm(describe(fitted, {0, 0}).centroid - b.centroid);
+      best_lum = fitted;
+    }
+  }
+  return best;
+}
+
+CeilingFrame ceilingOfFrame(const Frame& f, const CeilingOptions& options) {
+  const FrameTruth truth = readFrameTruth(f, luminance(f.image));
+  CeilingFrame cf;
+  cf.angle_deg = f.angle_deg;
+  cf.noise_sigma = truth.noise_sigma;
+  cv::Mat described = cv::Mat::zeros(truth.flare.size(), CV_32F);
+  for (const auto& g : truth.ghosts) {
+    const cv::Mat lum = luminance(g.image);
+    const Blob b = describe(lum, {0, 0});
+    if (!b.present || !(b.peak > options.fit_factor * truth.noise_sigma)) continue;
+    cv::Mat fitted;
+    CeilingGhost cg = fitTrueGhost(g, lum, b, truth.noise_sigma,
+                                   (lum > 0) & (f.valid > 0), options, fitted);
+    cg.visible = b.peak > options.visible_factor * truth.noise_sigma;
+    if (!fitted.empty()) described += fitted;
+    cf.ghosts.push_back(std::move(cg));
+  }
+  cf.psnr_db = psnr(described, truth.flare, (truth.flare > truth.noise_sigma) & (f.valid > 0));
+  cf.flare = truth.flare;
+  cf.described = described;
+  return cf;
+}
+
+}  // namespace
+
+ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument("CeilingOptions: " + error);
+  if (!stack.has_truth)
+    throw InputError(stack.source.string(), "has no ground truth (truth/): the model's ceiling is measured against it");
+  auto measured = measureFrames<CeilingFrame>(stack, "fit-ceiling", [&](size_t i) -> std::optional<CeilingFrame> {
+    if (i % options.frame_step != 0) return std::nullopt;
+    return ceilingOfFrame(stack.frames[i], options);
+  });
+  ModelCeiling c;
+  std::vector<double> psnrs, errors;
+  std::map<int, std::vector<const CeilingGhost*>> by_id;
+  for (auto& cf : measured) {
+    if (!cf) continue;
+    c.frames.push_back(std::move(*cf));
+  }
+  for (const auto& cf : c.frames) {
+    psnrs.push_back(cf.psnr_db);
+    for (const auto& g : cf.ghosts) {
+      if (!g.visible) continue;
+      errors.push_back(g.centroid_error_px);
+      ++c.visible_ghosts;
+      if (g.centroid_error_px <= 0.5) ++c.within_half_px;
+      by_id[g.id].push_back(&g);
+    }
+  }
+  for (const auto& [id, seen] : by_id) {
+    CeilingGhostSummary s;
+    s.id = id;
+    s.frames_visible = static_cast<int>(seen.size());
+    std::vector<double> p, e;
+    for (const CeilingGhost* g : seen) {
+      p.push_back(g->psnr_db);
+      e.push_back(g->centroid_error_px);
+    }
+    s.median_psnr_db = medianOf(p);
+    s.median_centroid_error_px = medianOf(e);
+    s.max_centroid_error_px = *std::max_element(e.begin(), e.end());
+    c.ghosts.push_back(s);
+  }
+  c.median_psnr_db = medianOf(psnrs);
+  c.median_centroid_error_px = medianOf(errors);
+  return c;
+}
+
+nlohmann::json ModelCeiling::toJson() const {
+  nlohmann::json j;
+  j["frames_measured"] = frames.size();
+  j["median_psnr_db"] = number(median_psnr_db);
+  j["median_centroid_error_px"] = number(median_centroid_error_px);
+  j["visible_ghosts"] = visible_ghosts;
+  j["within_half_px"] = within_half_px;
+  nlohmann::json fs = nlohmann::json::array();
+  for (const auto& f : frames) {
+    nlohmann::json gs = nlohmann::json::array();
+    for (const auto& g : f.ghosts) {
+      nlohmann::json parameters;
+      const auto v = model::toParameterVector(g.parameters);
+      for (size_t k = 0; k < v.size(); ++k) parameters[model::parameterName(static_cast<int>(k), g.parameters.channels)] = v[k];
+      gs.push_back({{"id", g.id},
+                    {"peak_sigma", number(g.peak_sigma)},
+                    {"radius_px", g.radius_px},
+                    {"visible", g.visible},
+                    {"psnr_db", number(g.psnr_db)},
+                    {"centroid_error_px", g.centroid_error_px},
+                    {"parameters", parameters}});
+    }
+    fs.push_back({{"angle_deg", f.angle_deg}, {"noise_sigma", f.noise_sigma}, {"psnr_db", number(f.psnr_db)}, {"ghosts", gs}});
+  }
+  j["frames"] = fs;
+  nlohmann::json ghosts = nlohmann::json::array();
+  for (const auto& g : this->ghosts)
+    ghosts.push_back({{"id", g.id},
+                      {"frames_visible", g.frames_visible},
+                      {"median_psnr_db", number(g.median_psnr_db)},
+                      {"median_centroid_error_px", number(g.median_centroid_error_px)},
+                      {"max_centroid_error_px", number(g.max_centroid_error_px)}});
+  j["true_ghosts"] = ghosts;
+  return j;
+}
+
+std::string ModelCeiling::BriefReport() const {
+  std::ostringstream s;
+  s.precision(3);
+  s << "Model ceiling over " << frames.size() << " frame(s), each true ghost fitted alone to its noise-free layer: "
+    << "median PSNR vs noise-free flare " << median_psnr_db << " dB; median centroid error "
+    << median_centroid_error_px << " px over " << visible_ghosts << " visible ghosts, " << within_half_px
+    << " within 0.5 px.";
+  // The ghosts the model describes worst (lowest PSNR against their own layers), up to three.
+  std::vector<CeilingGhostSummary> worst = ghosts;
+  std::stable_sort(worst.begin(), worst.end(), [](const CeilingGhostSummary& a, const CeilingGhostSummary& b) {
+    return a.median_psnr_db < b.median_psnr_db;
+  });
+  if (worst.size() > 3) worst.resize(3);
+  for (size_t i = 0; i < worst.size(); ++i) {
+    const auto& g = worst[i];
+    s << (i == 0 ? " Described worst: ghost " : "; ghost ") << g.id << ", its own PSNR " << g.median_psnr_db
+      << " dB, centroid error " << g.median_centroid_error_px << " px (up to " << g.max_centroid_error_px
+      << "), over " << g.frames_visible << " frame(s)";
+  }
+  if (!worst.empty()) s << ".";
   return s.str();
 }
 

@@ -28,6 +28,7 @@
 #include <nlohmann/json_fwd.hpp>
 #include <opencv2/core.hpp>
 
+#include "fit/cost.h"
 #include "fit/frame_fits.h"
 #include "fit/frames.h"
 #include "model/flare_model.h"
@@ -113,6 +114,82 @@ Evaluation evaluateModel(const model::FlareModel& model, const FrameStack& stack
 // The per-frame fits in the frames that were fitted; the others are left out.
 Evaluation evaluateFrameFits(const FrameFits& fits, const FrameStack& stack,
                              const EvaluationOptions& options = {});
+
+// ── The model's ceiling ──────────────────────────────────────────────────────────────────────────
+// What the ghost model (model/ghost_shape.h, Walch et al. 2018 §3.2) can describe of a simulated
+// capture at best, whatever the detection, tracking and optimizer: every true ghost of a frame is
+// fitted alone to its own noise-free truth layer, from three starts taken from the layer itself
+// (its moments with a soft and a sharp fall-off, and the extent of its pixels above 5 % of its
+// peak), each with the fit's cost (the edge term on) and then with the plain squared error, which
+// is what PSNR measures; the best in PSNR is kept. The frame's ceiling is the sum of those fits,
+// measured as fit-eval measures a model: PSNR against the noise-free flare over the flare region,
+// and the centroid error of every visible true ghost (peak > visible_factor × σ) against its fit.
+// A fit that lands below these figures loses to detection, tracking or the optimizer; a target
+// above them is beyond the model. Starts are local, so the figures are lower bounds on what the
+// model could reach; ghosts that cross are fitted apart, which a joint fit cannot beat in PSNR.
+struct CeilingOptions {
+  int frame_step = 10;          // measure frames 0, N, 2N, … of the stack (≥ 1)
+  // Fit each true ghost whose peak exceeds this × σ; fainter ones count as 0 (≥ 0; 0: every
+  // ghost with any light). Not 1: ghosts each below the noise sum to much of the flare where the
+  // light has left the frame (Heliar 640×427 at 12–21°: left out, the ceiling falls to 17.5 dB).
+  double fit_factor = 0;
+  double visible_factor = 10;   // centroid errors over ghosts above this × σ, fit-eval's rule (> 0)
+  int max_iterations = 100;     // Levenberg–Marquardt iterations per start and stage (≥ 1)
+  // The fit's cost without its robust loss and shape prior: the truth has no outliers to resist
+  // and no unseen parts to hold.
+  CostOptions cost = [] {
+    CostOptions c;
+    c.loss_scale = 0;
+    c.prior_fraction = 0;
+    return c;
+  }();
+
+  bool IsValid(std::string* error) const;
+};
+
+struct CeilingGhost {
+  int id = 0;
+  double peak_sigma = 0;          // its peak in noise σ
+  double radius_px = 0;           // √2 × its intensity-weighted RMS radius (as fit-eval's gate)
+  bool visible = false;           // peak > visible_factor × σ
+  double psnr_db = 0;             // its best fit against its own layer, over the layer's footprint
+                                  // (pixels > 0: faint ghosts have none above σ)
+  double centroid_error_px = 0;   // its best fit's centroid against its own
+  model::GhostParameters parameters;  // its best fit
+};
+
+struct CeilingFrame {
+  double angle_deg = 0;
+  double noise_sigma = 0;
+  double psnr_db = 0;             // the sum of the best fits against the noise-free flare
+  std::vector<CeilingGhost> ghosts;  // every fitted true ghost
+  cv::Mat flare;                  // the noise-free flare, luminance (CV_32F)
+  cv::Mat described;              // the sum of the best fits, luminance (CV_32F)
+};
+
+// One true ghost over the measured frames where it was visible.
+struct CeilingGhostSummary {
+  int id = 0;
+  int frames_visible = 0;
+  double median_psnr_db = 0;
+  double median_centroid_error_px = 0;
+  double max_centroid_error_px = 0;
+};
+
+struct ModelCeiling {
+  std::vector<CeilingFrame> frames;
+  std::vector<CeilingGhostSummary> ghosts;  // every ghost visible in some measured frame, by id
+  double median_psnr_db = 0;                // over frames
+  double median_centroid_error_px = 0;      // over visible ghosts in every frame
+  int visible_ghosts = 0;                   // (frame, ghost) pairs
+  int within_half_px = 0;                   // of them, centroid error ≤ 0.5 px
+
+  nlohmann::json toJson() const;
+  std::string BriefReport() const;
+};
+
+// InputError when the stack has no ground truth.
+ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& options = {});
 
 // Median of the finite values (NaN when none).
 double medianOf(std::vector<double> values);

@@ -9,12 +9,13 @@
 #include "common/error.h"
 #include "common/exr.h"
 #include "common/testing.h"
+#include "fit/testing.h"
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {
 namespace {
 namespace fs = std::filesystem;
-using testing::TempDir;
+using flarekit::testing::TempDir;
 
 const cv::Size kSize(200, 130);
 
@@ -51,8 +52,9 @@ model::FlareModel modelOf(const model::GhostParameters& g) {
 }
 
 // A one-frame stack at θ = 0.5° with its truth files in `dir`: `radiance` is the noise-free frame
-// (light and ghost), `ghost` the ghost's own layer.
-FrameStack stackOf(const TempDir& dir, const cv::Mat& frame, const cv::Mat& radiance, const cv::Mat& ghost) {
+// (light and ghosts), `ghosts` the ghosts' own layers (ids 0, 1, …).
+FrameStack stackOf(const TempDir& dir, const cv::Mat& frame, const cv::Mat& radiance,
+                   const std::vector<cv::Mat>& ghosts) {
   FrameStack s;
   s.size = kSize;
   s.has_truth = true;
@@ -64,10 +66,14 @@ FrameStack stackOf(const TempDir& dir, const cv::Mat& frame, const cv::Mat& radi
   f.ghosts_file = dir / "ghosts.exr";
   writeExr(f.truth_file, radiance);
   ExrImage layers;
-  layers.layers.push_back({"ghost.0", ghost});
+  for (size_t g = 0; g < ghosts.size(); ++g) layers.layers.push_back({"ghost." + std::to_string(g), ghosts[g]});
   writeExr(f.ghosts_file, layers);
   s.frames.push_back(f);
   return s;
+}
+
+FrameStack stackOf(const TempDir& dir, const cv::Mat& frame, const cv::Mat& radiance, const cv::Mat& ghost) {
+  return stackOf(dir, frame, radiance, std::vector<cv::Mat>{ghost});
 }
 
 // Copies of the stack's first frame (pixels and truth) at further angles.
@@ -203,6 +209,60 @@ TEST(EvaluateFrameFits, SummarisesEachTrueGhostOverTheFrames) {
   EXPECT_EQ(all.true_ghosts[0].frames_found, 3);
   EXPECT_TRUE(all.toJson()["true_ghosts"][0]["missed_range_deg"].is_null());
   EXPECT_EQ(all.BriefReport().find("Missed most"), std::string::npos);
+}
+
+TEST(ModelCeiling, ReachesAGhostOfTheModelsShapeAndNamesOneItCannotDescribe) {
+  TempDir dir;
+  // Ghost 0 has the model's own shape, with a rim twice as bright as its inside (from outlines
+  // beyond its own, the fit settles into a flat disc: the reason for the shrunk start). Ghost 1 is
+  // two discs apart at different heights in one layer, as a ghost split by a fold: no one outline,
+  // mirror-symmetric about its axis, covers both.
+  const cv::Mat own = render(testing::ghost(60, 65, 25, 30, 22, 2e-3, 1e-3));
+  const cv::Mat split = render(disc(130, 40, 12, 3e-3)) + render(disc(170, 95, 20, 1e-3));
+  cv::Mat noise(kSize, CV_32F);
+  cv::RNG(3).fill(noise, cv::RNG::NORMAL, 0, 1e-5);
+  const FrameStack stack = stackOf(dir, own + split + noise, own + split, std::vector<cv::Mat>{own, split});
+  const ModelCeiling c = measureModelCeiling(stack);
+  ASSERT_EQ(c.frames.size(), 1u);
+  ASSERT_EQ(c.frames[0].ghosts.size(), 2u);
+  const CeilingGhost& described = c.frames[0].ghosts[0];
+  const CeilingGhost& beyond = c.frames[0].ghosts[1];
+  EXPECT_TRUE(described.visible);
+  EXPECT_TRUE(beyond.visible);
+  EXPECT_GT(described.psnr_db, 40);
+  EXPECT_LT(described.centroid_error_px, 0.1);
+  EXPECT_LT(beyond.psnr_db, 20);
+  EXPECT_EQ(c.visible_ghosts, 2);
+  EXPECT_GE(c.within_half_px, 1);
+  // The frame's ceiling is held down by the ghost the model cannot describe.
+  EXPECT_LT(c.median_psnr_db, 25);
+  const std::string brief = c.BriefReport();
+  EXPECT_NE(brief.find("Described worst: ghost 1,"), std::string::npos) << brief;
+  const nlohmann::json j = c.toJson();
+  EXPECT_EQ(j["true_ghosts"].size(), 2u);
+  EXPECT_DOUBLE_EQ(j["frames"][0]["ghosts"][0]["parameters"]["Mx"].get<double>(), described.parameters.center_x);
+  // Every other frame: the second frame is left out.
+  FrameStack two = stack;
+  addFramesAt(two, {0.7});
+  CeilingOptions every_other;
+  every_other.frame_step = 2;
+  EXPECT_EQ(measureModelCeiling(two, every_other).frames.size(), 1u);
+}
+
+TEST(ModelCeiling, NeedsGroundTruth) {
+  FrameStack stack;
+  stack.size = kSize;
+  stack.source = "stack/frame_0000.exr";
+  Frame f;
+  f.image = render(disc(100, 65, 20, 1e-3));
+  f.valid = cv::Mat(kSize, CV_8U, cv::Scalar(255));
+  stack.frames.push_back(f);
+  try {
+    measureModelCeiling(stack);
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no ground truth"), std::string::npos) << e.what();
+  }
 }
 
 TEST(FrameFits, SavesAndLoadsEveryParameterExactly) {

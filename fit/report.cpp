@@ -42,25 +42,55 @@ cv::Mat logView(const cv::Mat& lum, double lo, double hi) {
 
 }  // namespace
 
+namespace {
+
+// Panels side by side on one logarithmic scale from lo to hi, each labelled, red lines between.
+cv::Mat panelSheet(const std::vector<std::pair<const char*, cv::Mat>>& panels, double lo, double hi) {
+  std::vector<cv::Mat> views;
+  for (const auto& [label, lum] : panels) views.push_back(logView(lum, lo, hi));
+  cv::Mat sheet;
+  cv::hconcat(views, sheet);
+  const int w = panels[0].second.cols;
+  for (size_t k = 0; k < panels.size(); ++k) {
+    if (k > 0) cv::line(sheet, {int(k) * w, 0}, {int(k) * w, sheet.rows - 1}, cv::Scalar(0, 0, 255));
+    cv::putText(sheet, panels[k].first, {int(k) * w + 6, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 255, 255), 1);
+  }
+  return sheet;
+}
+
+double peakOf(const cv::Mat& lum) {
+  double peak = 0;
+  cv::minMaxLoc(lum, nullptr, &peak);
+  return peak;
+}
+
+}  // namespace
+
 cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv::Mat& model_image,
                      double noise_sigma) {
   const cv::Mat c = luminance(capture), f = luminance(fits_image), m = luminance(model_image);
-  cv::Mat r = cv::abs(c - m);
-  double model_peak = 0, fits_peak = 0;
-  cv::minMaxLoc(m, nullptr, &model_peak);
-  cv::minMaxLoc(f, nullptr, &fits_peak);
   // From a fraction of the noise floor to the brightest ghost (the light itself clips).
   const double lo = std::max(0.3 * noise_sigma, 1e-12);
-  const double hi = std::max({2 * std::max(model_peak, fits_peak), lo * 100});
-  cv::Mat sheet;
-  cv::hconcat(std::vector<cv::Mat>{logView(c, lo, hi), logView(f, lo, hi), logView(m, lo, hi), logView(r, lo, hi)},
-              sheet);
-  const int w = capture.cols;
-  for (int k = 1; k < 4; ++k) cv::line(sheet, {k * w, 0}, {k * w, sheet.rows - 1}, cv::Scalar(0, 0, 255));
-  const char* labels[] = {"capture", "frame's fits", "model", "|capture - model|"};
-  for (int k = 0; k < 4; ++k)
-    cv::putText(sheet, labels[k], {k * w + 6, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 255, 255), 1);
-  return sheet;
+  const double hi = std::max(2 * std::max(peakOf(m), peakOf(f)), lo * 100);
+  return panelSheet({{"capture", c}, {"frame's fits", f}, {"model", m}, {"|capture - model|", cv::abs(c - m)}}, lo, hi);
+}
+
+cv::Mat ceilingSheet(const CeilingFrame& frame) {
+  const double lo = std::max(0.3 * frame.noise_sigma, 1e-12);
+  const double hi = std::max(2 * peakOf(frame.flare), lo * 100);
+  return panelSheet({{"noise-free flare", frame.flare},
+                     {"ceiling", frame.described},
+                     {"|flare - ceiling|", cv::abs(frame.flare - frame.described)}},
+                    lo, hi);
+}
+
+void writeCeilingSheets(const fs::path& dir, const ModelCeiling& ceiling) {
+  fs::create_directories(dir);
+  for (const auto& f : ceiling.frames) {
+    std::ostringstream name;
+    name << "ceiling_" << std::fixed << std::setprecision(2) << f.angle_deg << ".png";
+    writeImage8(dir / name.str(), ceilingSheet(f));
+  }
 }
 
 void writeFitReport(const fs::path& dir, const FitResult& result, const FrameStack& stack,

@@ -13,6 +13,7 @@
 
 #include <filesystem>
 
+#include "fit/evaluation.h"
 #include "fit/fit_capture.h"
 #include "fit/frames.h"
 
@@ -29,5 +30,11 @@ void writeFitReport(const std::filesystem::path& dir, const FitResult& result,
 // The contact-sheet image (8-bit BGR) of one frame: capture | fits | model | |capture − model|.
 cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv::Mat& model_image,
                      double noise_sigma);
+
+// `flarekit fit-ceiling --sheets DIR`: DIR/ceiling_<angle>.png per measured frame, noise-free flare
+// | the model's ceiling | |flare − ceiling| on one logarithmic scale (as the contact sheets),
+// written atomically.
+void writeCeilingSheets(const std::filesystem::path& dir, const ModelCeiling& ceiling);
+cv::Mat ceilingSheet(const CeilingFrame& frame);
 
 }  // namespace flarekit::fit

@@ -208,6 +208,49 @@ TEST(CliFit, BenchStartsBothOptimizersFromOneSeedAndReportsWhereTheyEnd) {
   }
 }
 
+// The ceiling of a capture whose ghosts have the model's own shape: every ghost described to the
+// pixel, in every other frame.
+TEST(CliFit, CeilingOfACaptureOfModelShapedGhosts) {
+  TempDir dir;
+  writeCapture(dir / "capture", 4);
+  auto r = runFlarekit({"-q", "fit-ceiling", (dir / "capture").string(), "--every", "2", "--json", "--sheets",
+                        (dir / "sheets").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // One picture per measured frame: noise-free flare | ceiling | |flare − ceiling|; the ghosts are
+  // described exactly, so the ceiling looks like the flare and the difference is dark.
+  for (const char* name : {"ceiling_0.00.png", "ceiling_0.40.png"}) {
+    const cv::Mat sheet = cv::imread((dir / "sheets" / name).string(), cv::IMREAD_GRAYSCALE);
+    ASSERT_EQ(sheet.cols, 3 * 200) << name;
+    // Below the labels (their descenders reach row 24).
+    const cv::Mat flare = sheet(cv::Rect(1, 26, 198, 104)), ceiling = sheet(cv::Rect(200 + 1, 26, 198, 104)),
+                  difference = sheet(cv::Rect(400 + 1, 26, 198, 104));
+    EXPECT_LT(cv::norm(flare, ceiling, cv::NORM_L1) / flare.total(), 2) << name;
+    double brightest = 0, brightest_difference = 0;
+    cv::minMaxLoc(flare, nullptr, &brightest);
+    cv::minMaxLoc(difference, nullptr, &brightest_difference);
+    EXPECT_GT(brightest, 100) << name;
+    EXPECT_LT(brightest_difference, 0.5 * brightest) << name;
+  }
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["frames_measured"].get<int>(), 2);
+  EXPECT_EQ(j["visible_ghosts"].get<int>(), 4);
+  EXPECT_EQ(j["within_half_px"].get<int>(), 4);
+  EXPECT_GT(j["median_psnr_db"].get<double>(), 40);
+  EXPECT_LT(j["median_centroid_error_px"].get<double>(), 0.1);
+  // Without --json: one line that says what was measured.
+  r = runFlarekit({"-q", "fit-ceiling", (dir / "capture").string(), "--every", "2"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.rfind("Model ceiling over 2 frame(s)", 0), 0u) << r.out;
+  // Frames without truth (an EXR stack) and a step of 0: one line, exit 2.
+  r = runFlarekit({"fit-ceiling", (dir / "capture/frames").string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(lineCount(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("no ground truth"), std::string::npos) << r.err;
+  r = runFlarekit({"fit-ceiling", (dir / "capture").string(), "--every", "0"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--every"), std::string::npos) << r.err;
+}
+
 TEST(CliFit, BadInputGivesOneLineAndExitTwo) {
   TempDir dir;
   writeCapture(dir / "capture", 4);
