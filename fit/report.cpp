@@ -40,10 +40,6 @@ cv::Mat logView(const cv::Mat& lum, double lo, double hi) {
   return bgr;
 }
 
-}  // namespace
-
-namespace {
-
 // Panels side by side on one logarithmic scale from lo to hi, each labelled, red lines between.
 cv::Mat panelSheet(const std::vector<std::pair<const char*, cv::Mat>>& panels, double lo, double hi) {
   std::vector<cv::Mat> views;
@@ -75,6 +71,9 @@ cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv
   return panelSheet({{"capture", c}, {"frame's fits", f}, {"model", m}, {"|capture - model|", cv::abs(c - m)}}, lo, hi);
 }
 
+namespace {
+
+// Noise-free flare | ceiling | |flare − ceiling|, scaled as the contact sheets.
 cv::Mat ceilingSheet(const CeilingFrame& frame) {
   const double lo = std::max(0.3 * frame.noise_sigma, 1e-12);
   const double hi = std::max(2 * peakOf(frame.flare), lo * 100);
@@ -83,6 +82,8 @@ cv::Mat ceilingSheet(const CeilingFrame& frame) {
                      {"|flare - ceiling|", cv::abs(frame.flare - frame.described)}},
                     lo, hi);
 }
+
+}  // namespace
 
 void writeCeilingSheets(const fs::path& dir, const ModelCeiling& ceiling) {
   fs::create_directories(dir);

@@ -35,6 +35,5 @@ cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv
 // | the model's ceiling | |flare − ceiling| on one logarithmic scale (as the contact sheets),
 // written atomically.
 void writeCeilingSheets(const std::filesystem::path& dir, const ModelCeiling& ceiling);
-cv::Mat ceilingSheet(const CeilingFrame& frame);
 
 }  // namespace flarekit::fit
