@@ -483,9 +483,10 @@ namespace {
 //    centroid, with a soft edge (Fo 3 px, Fi 0.3 of its size) and a sharp one (Fo 0.5 px, Fi 0.1);
 //  - that ellipse shrunk to 0.85, soft: a ghost with a bright rim has moments that overstate its
 //    size, and from an outline well beyond its own Levenberg–Marquardt settles into a flat disc
-//    whose border value is 0 (the fit tests' ghost with a rim twice its inside: 14.9 dB from 1.2×
-//    its size, exact from 0.8–1.1×). The 2σ ellipse reaches that ghost itself; the shrunk start
-//    is for brighter rims, and its gain on the captures was not measured apart;
+//    whose border value is 0 (the fit tests' ghost with a rim twice its inside: from a circle of
+//    its moment radius, 14.9 dB; from its own outline scaled 0.9–1.1×, exact; scaled 1.2× with a
+//    sharp edge, a flat disc again). The 2σ ellipse reaches that ghost itself; the shrunk start is
+//    for brighter rims, and its gain on the captures was not measured apart;
 //  - the box of its pixels above 5 % of its peak, sharp: ghosts cut by the frame or an aperture.
 std::vector<model::GhostParameters> ceilingStarts(const cv::Mat& image, const cv::Mat& lum, const Blob& b) {
   const int channels = image.channels();

@@ -214,7 +214,7 @@ TEST(EvaluateFrameFits, SummarisesEachTrueGhostOverTheFrames) {
 TEST(ModelCeiling, ReachesAGhostOfTheModelsShapeAndNamesOneItCannotDescribe) {
   TempDir dir;
   // Ghost 0 has the model's own shape, with a rim twice as bright as its inside (from a circle of
-  // its moment radius, 1.2× its height, the fit settles into a flat disc at 14.9 dB). Ghost 1 is
+  // its moment radius, the fit settles into a flat disc at 14.9 dB). Ghost 1 is
   // two discs apart at different heights in one layer, as a ghost split by a fold: no one outline,
   // mirror-symmetric about its axis, covers both.
   const cv::Mat own = render(testing::ghost(60, 65, 25, 30, 22, 2e-3, 1e-3));
