@@ -522,19 +522,20 @@ CeilingGhost fitTrueGhost(const GhostTruth& truth, const cv::Mat& lum, const Blo
   best.peak_sigma = noise_sigma > 0 ? b.peak / noise_sigma : kNaN;
   best.radius_px = b.radius;
   best.psnr_db = -std::numeric_limits<double>::infinity();
+  // Both stages see the same filtered frame: the filter depends on σ1, σ2 only, λ weighs it in the
+  // cost.
   CostOptions mse = options.cost;
   mse.edge_weight = 0;
-  const EdgeFilter edge(options.cost), mse_edge(mse);
+  const EdgeFilter edge(options.cost);
   const cv::Mat all_valid(lum.size(), CV_8U, cv::Scalar(255));  // the truth has no saturation
   const FramePyramid pyramid(truth.image, all_valid, edge, noise_sigma);
-  const FramePyramid mse_pyramid(truth.image, all_valid, mse_edge, noise_sigma);
   SolverOptions solver;
   solver.max_iterations = options.max_iterations;
   for (const auto& start : ceilingStarts(truth.image, lum, b)) {
     const std::vector<model::GhostParameters> one = {start};
     GroupCost cost(pyramid, edge, {}, one, options.cost);
     const GroupFitResult with_edges = solveGroup(cost, one, solver);
-    GroupCost mse_cost(mse_pyramid, mse_edge, {}, with_edges.ghosts, mse);
+    GroupCost mse_cost(pyramid, edge, {}, with_edges.ghosts, mse);
     const GroupFitResult plain = solveGroup(mse_cost, with_edges.ghosts, solver);
     for (const auto* fit : {&with_edges, &plain}) {
       cv::Mat fitted = luminance(model::renderGhosts(fit->ghosts, lum.size(), truth.image.channels()));
