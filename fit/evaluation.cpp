@@ -414,9 +414,12 @@ nlohmann::json Evaluation::toJson() const {
                   {"missed_true_ids", f.missed_true_ids},
                   {"matched", matched(f)},
                   {"missed", missed(f)},
-                  {"unmatched_model_ids", f.unmatched_model_ids}});
+                  {"unmatched_model_ids", f.unmatched_model_ids},
+                  {"ceiling_psnr_db", number(f.ceiling_psnr_db)}});
   }
   j["frames"] = fs;
+  j["ceiling_frames"] = ceiling_frames;
+  j["median_ceiling_gap_db"] = number(median_ceiling_gap_db);
   nlohmann::json ghosts = nlohmann::json::array();
   for (const auto& g : true_ghosts) {
     nlohmann::json e = {{"id", g.id},
@@ -458,6 +461,22 @@ std::string Evaluation::BriefReport() const {
       << "°, median peak " << g.missed_median_peak_sigma << " σ, radius " << g.median_radius_px << " px)";
   }
   if (!missed.empty()) s << ".";
+  // Against the model's ceiling: the median loss, and the frames that lost most, up to three.
+  if (ceiling_frames > 0) {
+    std::vector<const FrameEvaluation*> lost;
+    for (const auto& f : frames)
+      if (std::isfinite(f.ceiling_psnr_db) && std::isfinite(f.psnr_db)) lost.push_back(&f);
+    std::stable_sort(lost.begin(), lost.end(), [](const FrameEvaluation* a, const FrameEvaluation* b) {
+      return a->ceiling_psnr_db - a->psnr_db > b->ceiling_psnr_db - b->psnr_db;
+    });
+    if (lost.size() > 3) lost.resize(3);
+    s << " Against the model's ceiling (fit-ceiling) in " << ceiling_frames << " frame(s): median "
+      << median_ceiling_gap_db << " dB below it; most at";
+    for (size_t i = 0; i < lost.size(); ++i)
+      s << (i == 0 ? " " : ", ") << lost[i]->angle_deg << "° (" << lost[i]->psnr_db << " against "
+        << lost[i]->ceiling_psnr_db << " dB)";
+    s << ".";
+  }
   return s.str();
 }
 
@@ -585,6 +604,7 @@ ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& 
     return ceilingOfFrame(stack.frames[i], options);
   });
   ModelCeiling c;
+  c.image_size = stack.size;
   std::vector<double> psnrs, errors;
   std::map<int, std::vector<const CeilingGhost*>> by_id;
   for (auto& cf : measured) {
@@ -622,6 +642,10 @@ ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& 
 
 nlohmann::json ModelCeiling::toJson() const {
   nlohmann::json j;
+  j["format"] = kModelCeilingFormat;
+  j["version"] = 1;
+  j["image_width"] = image_size.width;
+  j["image_height"] = image_size.height;
   j["frames_measured"] = frames.size();
   j["median_psnr_db"] = number(median_psnr_db);
   j["median_centroid_error_px"] = number(median_centroid_error_px);
@@ -677,6 +701,41 @@ std::string ModelCeiling::BriefReport() const {
   }
   if (!worst.empty()) s << ".";
   return s.str();
+}
+
+std::vector<CeilingPoint> parseCeilingPoints(const nlohmann::json& json, cv::Size image_size,
+                                             const std::string& source) {
+  if (!json.is_object() || json.value("format", "") != kModelCeilingFormat)
+    throw InputError(source, std::string("is not the output of flarekit fit-ceiling --json (no \"format\": \"") +
+                                 kModelCeilingFormat + "\")");
+  try {
+    const cv::Size size(json.at("image_width").get<int>(), json.at("image_height").get<int>());
+    if (size != image_size)
+      throw InputError(source, "was measured on " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+                                   " frames, the capture's are " + std::to_string(image_size.width) + "x" +
+                                   std::to_string(image_size.height));
+    std::vector<CeilingPoint> points;
+    for (const auto& f : json.at("frames")) {
+      // A frame whose ceiling PSNR is null (no flare region) has nothing to compare against.
+      if (f.at("psnr_db").is_null()) continue;
+      points.push_back({f.at("angle_deg").get<double>(), f.at("psnr_db").get<double>()});
+    }
+    return points;
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(source, std::string("is not a complete fit-ceiling result: ") + e.what());
+  }
+}
+
+void Evaluation::setCeiling(const std::vector<CeilingPoint>& ceiling) {
+  std::vector<double> gaps;
+  for (auto& f : frames) {
+    f.ceiling_psnr_db = kNaN;
+    for (const auto& c : ceiling)
+      if (std::abs(c.angle_deg - f.angle_deg) <= 1e-6) f.ceiling_psnr_db = c.psnr_db;
+    if (std::isfinite(f.ceiling_psnr_db) && std::isfinite(f.psnr_db)) gaps.push_back(f.ceiling_psnr_db - f.psnr_db);
+  }
+  ceiling_frames = static_cast<int>(gaps.size());
+  median_ceiling_gap_db = medianOf(gaps);
 }
 
 }  // namespace flarekit::fit

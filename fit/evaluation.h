@@ -21,6 +21,7 @@
 // not inflate it).
 
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -74,6 +75,15 @@ struct FrameEvaluation {
   };
   std::vector<Missed> missed;
   std::vector<int> unmatched_model_ids;    // model ghosts without a true ghost
+  // The model's ceiling in this frame (`flarekit fit-ceiling`, Evaluation::setCeiling); NaN where
+  // it was not measured or not given.
+  double ceiling_psnr_db = std::numeric_limits<double>::quiet_NaN();
+};
+
+// The model's ceiling at one angle, as `flarekit fit-ceiling --json` writes it (ModelCeiling).
+struct CeilingPoint {
+  double angle_deg = 0;
+  double psnr_db = 0;
 };
 
 // One true ghost over the evaluated frames: in how many it was visible and found, and where and
@@ -97,6 +107,14 @@ struct Evaluation {
   double median_centroid_error_px = 0;
   double recall = 0, precision = 0;
   int true_ghosts_visible = 0, true_ghosts_found = 0, model_ghosts = 0, model_ghosts_matched = 0;
+  // Against the model's ceiling (setCeiling): the frames it was measured in, and the median of
+  // ceiling − PSNR over them (what detection, tracking and the optimizer lost; NaN when none).
+  int ceiling_frames = 0;
+  double median_ceiling_gap_db = std::numeric_limits<double>::quiet_NaN();
+
+  // Sets each frame's ceiling_psnr_db from the point at its angle (within 1e-6°) and the summary
+  // above; frames without one keep NaN.
+  void setCeiling(const std::vector<CeilingPoint>& ceiling);
 
   nlohmann::json toJson() const;
   std::string BriefReport() const;
@@ -181,6 +199,7 @@ struct CeilingGhostSummary {
 };
 
 struct ModelCeiling {
+  cv::Size image_size;                      // the capture's
   std::vector<CeilingFrame> frames;
   std::vector<CeilingGhostSummary> ghosts;  // every ghost visible in some measured frame, by id
   double median_psnr_db = 0;                // over frames
@@ -194,6 +213,12 @@ struct ModelCeiling {
 
 // InputError when the stack has no ground truth.
 ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& options = {});
+
+// The frames' ceilings of ModelCeiling::toJson output (format kModelCeilingFormat) measured on a
+// capture of `image_size`; InputError naming `source` when `json` is not that.
+inline constexpr const char* kModelCeilingFormat = "flarekit-model-ceiling";
+std::vector<CeilingPoint> parseCeilingPoints(const nlohmann::json& json, cv::Size image_size,
+                                             const std::string& source);
 
 // Median of the finite values (NaN when none).
 double medianOf(std::vector<double> values);

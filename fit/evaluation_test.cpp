@@ -265,6 +265,57 @@ TEST(ModelCeiling, NeedsGroundTruth) {
   }
 }
 
+TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
+  Evaluation ev;
+  ev.has_truth = true;
+  for (auto [angle, psnr] : std::vector<std::pair<double, double>>{{0, 20}, {1, 25}, {2, 31}, {3, 18}}) {
+    FrameEvaluation f;
+    f.angle_deg = angle;
+    f.psnr_db = psnr;
+    ev.frames.push_back(f);
+  }
+  // The ceiling as fit-ceiling writes it, measured every other frame of this capture, and one more
+  // frame the evaluation does not have.
+  ModelCeiling c;
+  c.image_size = kSize;
+  for (auto [angle, psnr] : std::vector<std::pair<double, double>>{{0, 30}, {2, 36}, {5, 50}}) {
+    CeilingFrame f;
+    f.angle_deg = angle;
+    f.psnr_db = psnr;
+    c.frames.push_back(f);
+  }
+  ev.setCeiling(parseCeilingPoints(c.toJson(), kSize, "ceiling.json"));
+  EXPECT_DOUBLE_EQ(ev.frames[0].ceiling_psnr_db, 30);
+  EXPECT_TRUE(std::isnan(ev.frames[1].ceiling_psnr_db));
+  EXPECT_DOUBLE_EQ(ev.frames[2].ceiling_psnr_db, 36);
+  EXPECT_EQ(ev.ceiling_frames, 2);
+  EXPECT_DOUBLE_EQ(ev.median_ceiling_gap_db, 7.5);  // 10 dB and 5 dB below it
+  const std::string brief = ev.BriefReport();
+  EXPECT_NE(brief.find("in 2 frame(s): median 7.5 dB below it; most at 0° (20 against 30 dB), 2° (31 against 36 dB)."),
+            std::string::npos)
+      << brief;
+  const nlohmann::json j = ev.toJson();
+  EXPECT_EQ(j["median_ceiling_gap_db"].get<double>(), 7.5);
+  EXPECT_TRUE(j["frames"][1]["ceiling_psnr_db"].is_null());
+
+  // A ceiling of another capture's size, and a file that is no ceiling: the file named, and why.
+  try {
+    parseCeilingPoints(c.toJson(), {640, 427}, "ceiling.json");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("ceiling.json: was measured on 200x130 frames, the capture's are 640x427"),
+              std::string::npos)
+        << e.what();
+  }
+  try {
+    parseCeilingPoints(ev.toJson(), kSize, "eval.json");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("eval.json: is not the output of flarekit fit-ceiling"), std::string::npos)
+        << e.what();
+  }
+}
+
 TEST(FrameFits, SavesAndLoadsEveryParameterExactly) {
   TempDir dir;
   FrameFits fits;

@@ -31,6 +31,13 @@ void writeFitReport(const std::filesystem::path& dir, const FitResult& result,
 cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv::Mat& model_image,
                      double noise_sigma);
 
+// `flarekit fit-eval --plot FILE`: the evaluation over the capture's angles, 8-bit BGR. Above, each
+// frame's PSNR against the noise-free flare (against the capture without truth) and, where the
+// evaluation has one (Evaluation::setCeiling), the model's ceiling; below, per frame, the true
+// ghosts visible and found and, under the axis, the model ghosts matched to none (without truth:
+// the model ghosts).
+cv::Mat evaluationPlot(const Evaluation& evaluation);
+
 // `flarekit fit-ceiling --sheets DIR`: DIR/ceiling_<angle>.png per measured frame, noise-free flare
 // | the model's ceiling | |flare − ceiling| on one logarithmic scale (as the contact sheets),
 // written atomically.

@@ -137,6 +137,44 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
   EXPECT_GE(f["recall"].get<double>(), 0.95) << frames.out;
   EXPECT_GE(f["median_psnr_db"].get<double>(), 32);
   EXPECT_LE(f["median_centroid_error_px"].get<double>(), 0.5);
+
+  // Against the model's ceiling, measured every 4th frame: each of those frames gets the ceiling's
+  // PSNR at its angle, and the plot shows both over the angles.
+  auto ceiling = runFlarekit({"-q", "fit-ceiling", (dir / "capture").string(), "--every", "4", "--json"});
+  ASSERT_EQ(ceiling.exit_code, 0) << ceiling.err;
+  std::ofstream(dir / "ceiling.json") << ceiling.out;
+  const auto c = nlohmann::json::parse(ceiling.out);
+  auto against = runFlarekit({"-q", "fit-eval", model, (dir / "capture").string(), "--ceiling",
+                              (dir / "ceiling.json").string(), "--plot", (dir / "eval.png").string(), "--json"});
+  ASSERT_EQ(against.exit_code, 0) << against.err;
+  const auto a = nlohmann::json::parse(against.out);
+  EXPECT_EQ(a["ceiling_frames"].get<int>(), 3);
+  for (const auto& cf : c["frames"])
+    for (const auto& ef : a["frames"])
+      if (ef["angle_deg"] == cf["angle_deg"]) {
+        EXPECT_EQ(ef["ceiling_psnr_db"], cf["psnr_db"]);
+      }
+  EXPECT_TRUE(a["frames"][1]["ceiling_psnr_db"].is_null());
+  const cv::Mat plot = cv::imread((dir / "eval.png").string());
+  EXPECT_EQ(plot.size(), cv::Size(960, 600));
+  // A plot that is no PNG, and a ceiling file that is not one: one line naming the file, exit 2.
+  auto bad = runFlarekit({"fit-eval", model, (dir / "capture").string(), "--plot", (dir / "eval.jpg").string()});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(lineCount(bad.err), 1) << bad.err;
+  EXPECT_NE(bad.err.find("eval.jpg"), std::string::npos) << bad.err;
+  bad = runFlarekit({"fit-eval", model, (dir / "capture").string(), "--ceiling", model});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(lineCount(bad.err), 1) << bad.err;
+  EXPECT_NE(bad.err.find("model.json: is not the output of flarekit fit-ceiling"), std::string::npos) << bad.err;
+  // The ceiling measured on even frames only, and the odd ones evaluated: nothing to compare.
+  bad = runFlarekit({"fit-eval", model, (dir / "capture").string(), "--frames", "odd", "--ceiling",
+                     (dir / "ceiling.json").string()});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("ceiling.json: has no frame at the angles evaluated"), std::string::npos) << bad.err;
+  // Frames without truth (an EXR stack) have no ceiling to compare with.
+  bad = runFlarekit({"fit-eval", model, (dir / "capture/frames").string(), "--ceiling", (dir / "ceiling.json").string()});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("the capture has none"), std::string::npos) << bad.err;
 }
 
 // The same frames give the same model on any machine: five frames of the committed Heliar capture
