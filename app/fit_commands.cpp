@@ -151,8 +151,10 @@ void registerFitEval(CLI::App& app) {
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder, or EXR files / folders")->required();
   cmd->add_option("--frames", o->frames, "all (default) or odd (the frames --holdout odd left out)");
   cmd->add_option("--ceiling", o->ceiling,
-                  "The capture's model ceiling (flarekit fit-ceiling --json output): each frame's PSNR set against it");
-  cmd->add_option("--plot", o->plot, "PNG of PSNR and ghosts found over the angles (with the ceiling, when given)");
+                  "The capture's model ceiling (flarekit fit-ceiling --json output): each frame's "
+                  "PSNR set against it");
+  cmd->add_option("--plot", o->plot,
+                  "PNG of PSNR and ghosts found over the angles (with the ceiling, when given)");
   cmd->add_flag("--json", o->json, "Print one JSON object");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   addStackOptions(cmd, o->stack);
@@ -180,13 +182,15 @@ void registerFitEval(CLI::App& app) {
       throw InputError(o->model, "has " + std::to_string(channels) + " channel(s), the capture " +
                                      std::to_string(stack.channels));
     if (!o->plot.empty()) {
-      if (fs::path(o->plot).extension() != ".png") throw InputError(o->plot, "--plot writes a PNG: name it *.png");
+      if (fs::path(o->plot).extension() != ".png")
+        throw InputError(o->plot, "--plot writes a PNG: name it *.png");
       checkWritable(o->plot);  // before the evaluation, not after
     }
     std::vector<fit::CeilingPoint> ceiling;
     if (!o->ceiling.empty()) {
       if (!stack.has_truth)
-        throw InputError(o->ceiling, "is a ceiling against ground truth, and the capture has none (truth/)");
+        throw InputError(o->ceiling,
+                         "is a ceiling against ground truth, and the capture has none (truth/)");
       ceiling = fit::parseCeilingPoints(loadJsonFile(o->ceiling).json(), stack.size, o->ceiling);
     }
     fit::EvaluationOptions options;
@@ -199,7 +203,8 @@ void registerFitEval(CLI::App& app) {
     if (!o->ceiling.empty()) {
       ev.setCeiling(ceiling);
       if (ev.ceiling_frames == 0)
-        throw InputError(o->ceiling, "has no frame at the angles evaluated (was it measured on this capture?)");
+        throw InputError(o->ceiling,
+                         "has no frame at the angles evaluated (was it measured on this capture?)");
     }
     if (!o->plot.empty()) writeImage8(o->plot, fit::evaluationPlot(ev));
     if (o->json)

@@ -138,7 +138,14 @@ class FramePyramid {
 // keeps this one for now: switched to the pixel noise, its detection levels (in σ) find the sum
 // of the faint veils as one frame-filling blob, and on the 640×427 0–30° captures the median PSNR
 // went 22.2 → 25.2 dB on the Heliar (inside the 22.2–25.1 dB that λ ± 1 % alone gives) but
-// 22.9 → 19.3 dB on the Tessar, whose precision fell 80 → 68 %.
+// 22.9 → 19.3 dB on the Tessar, whose precision fell 80 → 68 %. Measured again with the fitter
+// of 6528a83 (model's recall / precision / median PSNR / median centroid error, means over
+// λ × 0.99, 1, 1.01; this estimate: Heliar 71.2 / 86.5 % / 24.0 dB / 8.8 px, Tessar 51.4 / 78.0 /
+// 22.5 / 15.6), the Tessar's recall rises most, the precision and PSNR fall:
+//   pixel noise everywhere:  Heliar 70.2 / 81.1 / 21.8 / 8.2,  Tessar 71.2 / 66.7 / 21.6 / 10.9;
+//   so, lowest level 12σ:    Heliar 69.6 / 85.1 / 21.9 / 10.1, Tessar 58.0 / 63.8 / 23.1 / 11.3;
+//   only where tracks end:   Heliar 74.7 / 85.0 / 21.6 / 11.1, Tessar 52.7 / 74.9 / 22.3 / 14.9.
+// Each of those fits took 55–96 s wall, against 47–73 s with this estimate.
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The noise σ of the pixels: 1.4826 / √2 × the median absolute difference of horizontal

@@ -466,9 +466,10 @@ std::string Evaluation::BriefReport() const {
     std::vector<const FrameEvaluation*> lost;
     for (const auto& f : frames)
       if (std::isfinite(f.ceiling_psnr_db) && std::isfinite(f.psnr_db)) lost.push_back(&f);
-    std::stable_sort(lost.begin(), lost.end(), [](const FrameEvaluation* a, const FrameEvaluation* b) {
-      return a->ceiling_psnr_db - a->psnr_db > b->ceiling_psnr_db - b->psnr_db;
-    });
+    std::stable_sort(lost.begin(), lost.end(),
+                     [](const FrameEvaluation* a, const FrameEvaluation* b) {
+                       return a->ceiling_psnr_db - a->psnr_db > b->ceiling_psnr_db - b->psnr_db;
+                     });
     if (lost.size() > 3) lost.resize(3);
     s << " Against the model's ceiling (fit-ceiling) in " << ceiling_frames << " frame(s): median "
       << median_ceiling_gap_db << " dB below it; most at";
@@ -706,13 +707,15 @@ std::string ModelCeiling::BriefReport() const {
 std::vector<CeilingPoint> parseCeilingPoints(const nlohmann::json& json, cv::Size image_size,
                                              const std::string& source) {
   if (!json.is_object() || json.value("format", "") != kModelCeilingFormat)
-    throw InputError(source, std::string("is not the output of flarekit fit-ceiling --json (no \"format\": \"") +
-                                 kModelCeilingFormat + "\")");
+    throw InputError(
+        source, std::string("is not the output of flarekit fit-ceiling --json (no \"format\": \"") +
+                    kModelCeilingFormat + "\")");
   try {
     const cv::Size size(json.at("image_width").get<int>(), json.at("image_height").get<int>());
     if (size != image_size)
-      throw InputError(source, "was measured on " + std::to_string(size.width) + "x" + std::to_string(size.height) +
-                                   " frames, the capture's are " + std::to_string(image_size.width) + "x" +
+      throw InputError(source, "was measured on " + std::to_string(size.width) + "x" +
+                                   std::to_string(size.height) + " frames, the capture's are " +
+                                   std::to_string(image_size.width) + "x" +
                                    std::to_string(image_size.height));
     std::vector<CeilingPoint> points;
     for (const auto& f : json.at("frames")) {
@@ -732,7 +735,8 @@ void Evaluation::setCeiling(const std::vector<CeilingPoint>& ceiling) {
     f.ceiling_psnr_db = kNaN;
     for (const auto& c : ceiling)
       if (std::abs(c.angle_deg - f.angle_deg) <= 1e-6) f.ceiling_psnr_db = c.psnr_db;
-    if (std::isfinite(f.ceiling_psnr_db) && std::isfinite(f.psnr_db)) gaps.push_back(f.ceiling_psnr_db - f.psnr_db);
+    if (std::isfinite(f.ceiling_psnr_db) && std::isfinite(f.psnr_db))
+      gaps.push_back(f.ceiling_psnr_db - f.psnr_db);
   }
   ceiling_frames = static_cast<int>(gaps.size());
   median_ceiling_gap_db = medianOf(gaps);

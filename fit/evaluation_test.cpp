@@ -268,7 +268,8 @@ TEST(ModelCeiling, NeedsGroundTruth) {
 TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
   Evaluation ev;
   ev.has_truth = true;
-  for (auto [angle, psnr] : std::vector<std::pair<double, double>>{{0, 20}, {1, 25}, {2, 31}, {3, 18}}) {
+  for (auto [angle, psnr] :
+       std::vector<std::pair<double, double>>{{0, 20}, {1, 25}, {2, 31}, {3, 18}}) {
     FrameEvaluation f;
     f.angle_deg = angle;
     f.psnr_db = psnr;
@@ -291,7 +292,8 @@ TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
   EXPECT_EQ(ev.ceiling_frames, 2);
   EXPECT_DOUBLE_EQ(ev.median_ceiling_gap_db, 7.5);  // 10 dB and 5 dB below it
   const std::string brief = ev.BriefReport();
-  EXPECT_NE(brief.find("in 2 frame(s): median 7.5 dB below it; most at 0° (20 against 30 dB), 2° (31 against 36 dB)."),
+  EXPECT_NE(brief.find("in 2 frame(s): median 7.5 dB below it; most at 0° (20 against 30 dB), 2° "
+                       "(31 against 36 dB)."),
             std::string::npos)
       << brief;
   const nlohmann::json j = ev.toJson();
@@ -303,7 +305,8 @@ TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
     parseCeilingPoints(c.toJson(), {640, 427}, "ceiling.json");
     FAIL() << "no error";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("ceiling.json: was measured on 200x130 frames, the capture's are 640x427"),
+    EXPECT_NE(std::string(e.what()).find(
+                  "ceiling.json: was measured on 200x130 frames, the capture's are 640x427"),
               std::string::npos)
         << e.what();
   }
@@ -311,7 +314,8 @@ TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
     parseCeilingPoints(ev.toJson(), kSize, "eval.json");
     FAIL() << "no error";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("eval.json: is not the output of flarekit fit-ceiling"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("eval.json: is not the output of flarekit fit-ceiling"),
+              std::string::npos)
         << e.what();
   }
 }

@@ -2,8 +2,8 @@
 
 #include <cmath>
 #include <fstream>
-#include <limits>
 #include <iomanip>
+#include <limits>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -107,7 +107,9 @@ struct PlotPanel {
   cv::Rect area;
   double x0, x1, y0, y1;
 
-  int px(double x) const { return area.x + static_cast<int>(std::lround((x - x0) / (x1 - x0) * area.width)); }
+  int px(double x) const {
+    return area.x + static_cast<int>(std::lround((x - x0) / (x1 - x0) * area.width));
+  }
   int py(double y) const {
     return area.y + area.height - static_cast<int>(std::lround((y - y0) / (y1 - y0) * area.height));
   }
@@ -117,29 +119,34 @@ struct PlotPanel {
     const double ys = tickStep(y1 - y0, 5);
     for (double y = std::ceil(y0 / ys) * ys; y <= y1 + 1e-9; y += ys) {
       cv::line(image, {area.x, py(y)}, {area.x + area.width, py(y)}, grid);
-      cv::putText(image, tickLabel(y), {area.x - 42, py(y) + 4}, cv::FONT_HERSHEY_SIMPLEX, 0.4, ink, 1, cv::LINE_AA);
+      cv::putText(image, tickLabel(y), {area.x - 42, py(y) + 4}, cv::FONT_HERSHEY_SIMPLEX, 0.4, ink,
+                  1, cv::LINE_AA);
     }
     const double xs = tickStep(x1 - x0, 10);
     for (double x = std::ceil(x0 / xs) * xs; x <= x1 + 1e-9; x += xs) {
       cv::line(image, {px(x), area.y}, {px(x), area.y + area.height}, grid);
       if (x_labels)
-        cv::putText(image, tickLabel(x), {px(x) - 8, area.y + area.height + 16}, cv::FONT_HERSHEY_SIMPLEX, 0.4,
-                    ink, 1, cv::LINE_AA);
+        cv::putText(image, tickLabel(x), {px(x) - 8, area.y + area.height + 16},
+                    cv::FONT_HERSHEY_SIMPLEX, 0.4, ink, 1, cv::LINE_AA);
     }
     cv::rectangle(image, area, ink);
-    cv::putText(image, y_label, {area.x + 4, area.y - 6}, cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1, cv::LINE_AA);
+    cv::putText(image, y_label, {area.x + 4, area.y - 6}, cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1,
+                cv::LINE_AA);
   }
 };
 
 }  // namespace
 
 cv::Mat evaluationPlot(const Evaluation& ev) {
-  const cv::Scalar white(255, 255, 255), ink(60, 60, 60), fit_colour(180, 90, 20), ceiling_colour(0, 130, 255),
-      visible_colour(185, 185, 185), found_colour(60, 160, 50), unmatched_colour(50, 50, 210);
+  const cv::Scalar white(255, 255, 255), ink(60, 60, 60), fit_colour(180, 90, 20),
+      ceiling_colour(0, 130, 255), visible_colour(185, 185, 185), found_colour(60, 160, 50),
+      unmatched_colour(50, 50, 210);
   cv::Mat image(600, 960, CV_8UC3, white);
   double a0 = std::numeric_limits<double>::infinity(), a1 = -a0, p0 = a0, p1 = -a0;
   int count_max = 1, unmatched_max = 0;
-  auto psnrOf = [&](const FrameEvaluation& f) { return ev.has_truth ? f.psnr_db : f.capture_psnr_db; };
+  auto psnrOf = [&](const FrameEvaluation& f) {
+    return ev.has_truth ? f.psnr_db : f.capture_psnr_db;
+  };
   for (const auto& f : ev.frames) {
     a0 = std::min(a0, f.angle_deg);
     a1 = std::max(a1, f.angle_deg);
@@ -149,7 +156,8 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
         p1 = std::max(p1, p);
       }
     count_max = std::max({count_max, f.true_ghosts_visible, ev.has_truth ? 0 : f.model_ghosts});
-    if (ev.has_truth) unmatched_max = std::max(unmatched_max, f.model_ghosts - f.model_ghosts_matched);
+    if (ev.has_truth)
+      unmatched_max = std::max(unmatched_max, f.model_ghosts - f.model_ghosts_matched);
   }
   if (ev.frames.empty()) return image;
   if (!(a1 > a0)) {
@@ -160,21 +168,28 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
   p0 = std::floor(p0 / 5) * 5;
   p1 = std::max(std::ceil(p1 / 5) * 5, p0 + 5);
   const PlotPanel top{cv::Rect(60, 40, 870, 300), a0, a1, p0, p1};
-  const PlotPanel bottom{cv::Rect(60, 380, 870, 180), a0, a1, -double(unmatched_max), double(count_max)};
-  top.drawAxes(image, ev.has_truth ? "PSNR against the noise-free flare, dB" : "PSNR against the capture, dB", false);
-  bottom.drawAxes(image,
-                  ev.has_truth ? "true ghosts visible (grey) and found (green); model ghosts matched to none (red)"
-                               : "model ghosts",
-                  true);
-  cv::putText(image, "angle, deg", {bottom.area.x + bottom.area.width - 80, 596}, cv::FONT_HERSHEY_SIMPLEX, 0.45,
-              ink, 1, cv::LINE_AA);
+  const PlotPanel bottom{cv::Rect(60, 380, 870, 180), a0, a1, -double(unmatched_max),
+                         double(count_max)};
+  top.drawAxes(
+      image,
+      ev.has_truth ? "PSNR against the noise-free flare, dB" : "PSNR against the capture, dB",
+      false);
+  bottom.drawAxes(
+      image,
+      ev.has_truth
+          ? "true ghosts visible (grey) and found (green); model ghosts matched to none (red)"
+          : "model ghosts",
+      true);
+  cv::putText(image, "angle, deg", {bottom.area.x + bottom.area.width - 80, 596},
+              cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1, cv::LINE_AA);
 
   // Bars a little narrower than the frames' spacing.
-  const int half = std::max(1, static_cast<int>(0.4 * top.area.width / std::max<size_t>(ev.frames.size(), 1)));
+  const int half =
+      std::max(1, static_cast<int>(0.4 * top.area.width / std::max<size_t>(ev.frames.size(), 1)));
   auto bar = [&](double a, double from, double to, const cv::Scalar& colour) {
     if (from == to) return;
-    cv::rectangle(image, cv::Point(bottom.px(a) - half, bottom.py(from)), cv::Point(bottom.px(a) + half, bottom.py(to)),
-                  colour, cv::FILLED);
+    cv::rectangle(image, cv::Point(bottom.px(a) - half, bottom.py(from)),
+                  cv::Point(bottom.px(a) + half, bottom.py(to)), colour, cv::FILLED);
   };
   for (const auto& f : ev.frames) {
     if (ev.has_truth) {
@@ -185,7 +200,8 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
       bar(f.angle_deg, 0, f.model_ghosts, visible_colour);
     }
   }
-  cv::line(image, {bottom.area.x, bottom.py(0)}, {bottom.area.x + bottom.area.width, bottom.py(0)}, ink);
+  cv::line(image, {bottom.area.x, bottom.py(0)}, {bottom.area.x + bottom.area.width, bottom.py(0)},
+           ink);
 
   // The PSNR curve (broken where a frame has none) and the ceiling's points.
   std::vector<cv::Point> run;
@@ -213,12 +229,13 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
   // The legend, on the panel's title line (inside the panel it would hide points).
   const cv::Point legend(top.area.x + top.area.width - 400, top.area.y - 10);
   cv::line(image, legend, legend + cv::Point(24, 0), fit_colour, 2);
-  cv::putText(image, "each frame", legend + cv::Point(30, 4), cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1, cv::LINE_AA);
+  cv::putText(image, "each frame", legend + cv::Point(30, 4), cv::FONT_HERSHEY_SIMPLEX, 0.45, ink,
+              1, cv::LINE_AA);
   if (has_ceiling) {
     const cv::Point c = legend + cv::Point(142, 0);
     cv::rectangle(image, c - cv::Point(4, 4), c + cv::Point(4, 4), ceiling_colour, 2);
-    cv::putText(image, "the model's ceiling (fit-ceiling)", c + cv::Point(12, 4), cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1,
-                cv::LINE_AA);
+    cv::putText(image, "the model's ceiling (fit-ceiling)", c + cv::Point(12, 4),
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1, cv::LINE_AA);
   }
   return image;
 }

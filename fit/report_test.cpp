@@ -12,7 +12,9 @@ std::vector<int> rowsOfColour(const cv::Mat& plot, int x, cv::Vec3b bgr) {
   std::vector<int> rows;
   for (int y = 0; y < plot.rows; ++y) {
     const cv::Vec3b p = plot.at<cv::Vec3b>(y, x);
-    if (std::abs(p[0] - bgr[0]) < 40 && std::abs(p[1] - bgr[1]) < 40 && std::abs(p[2] - bgr[2]) < 40) rows.push_back(y);
+    if (std::abs(p[0] - bgr[0]) < 40 && std::abs(p[1] - bgr[1]) < 40 &&
+        std::abs(p[2] - bgr[2]) < 40)
+      rows.push_back(y);
   }
   return rows;
 }
@@ -41,11 +43,13 @@ TEST(EvaluationPlot, DrawsEachFramesPsnrAtItsHeightAndTheCeilingWhereGiven) {
     f.model_ghosts_matched = 1;
     ev.frames.push_back(f);
   }
-  const cv::Vec3b curve(180, 90, 20), ceiling(0, 130, 255), found(60, 160, 50), unmatched(50, 50, 210);
+  const cv::Vec3b curve(180, 90, 20), ceiling(0, 130, 255), found(60, 160, 50),
+      unmatched(50, 50, 210);
   const cv::Mat plot = evaluationPlot(ev);
   ASSERT_EQ(plot.type(), CV_8UC3);
   // The plot spans the angles: the frames at 0°, 10° and 20° sit at its left end, middle and right
-  // end; each frame's point is where the curve's pixels are in its column, higher for a higher PSNR.
+  // end; each frame's point is where the curve's pixels are in its column, higher for a higher
+  // PSNR.
   auto pointRow = [&](int x) {
     const std::vector<int> rows = rowsOfColour(plot, x, curve);
     EXPECT_FALSE(rows.empty()) << "no curve in column " << x;
@@ -66,7 +70,8 @@ TEST(EvaluationPlot, DrawsEachFramesPsnrAtItsHeightAndTheCeilingWhereGiven) {
   // With the ceiling measured at 10°: its marker in that frame's column, above the frame's point.
   ev.frames[1].ceiling_psnr_db = 40;
   const cv::Mat with = evaluationPlot(ev);
-  const std::vector<int> marker = rowsOfColour(with, middle - 4, ceiling);  // the marker's left side
+  const std::vector<int> marker =
+      rowsOfColour(with, middle - 4, ceiling);  // the marker's left side
   const std::vector<int> point = rowsOfColour(with, middle, curve);
   ASSERT_FALSE(marker.empty());
   ASSERT_FALSE(point.empty());

@@ -140,12 +140,14 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
 
   // Against the model's ceiling, measured every 4th frame: each of those frames gets the ceiling's
   // PSNR at its angle, and the plot shows both over the angles.
-  auto ceiling = runFlarekit({"-q", "fit-ceiling", (dir / "capture").string(), "--every", "4", "--json"});
+  auto ceiling =
+      runFlarekit({"-q", "fit-ceiling", (dir / "capture").string(), "--every", "4", "--json"});
   ASSERT_EQ(ceiling.exit_code, 0) << ceiling.err;
   std::ofstream(dir / "ceiling.json") << ceiling.out;
   const auto c = nlohmann::json::parse(ceiling.out);
   auto against = runFlarekit({"-q", "fit-eval", model, (dir / "capture").string(), "--ceiling",
-                              (dir / "ceiling.json").string(), "--plot", (dir / "eval.png").string(), "--json"});
+                              (dir / "ceiling.json").string(), "--plot",
+                              (dir / "eval.png").string(), "--json"});
   ASSERT_EQ(against.exit_code, 0) << against.err;
   const auto a = nlohmann::json::parse(against.out);
   EXPECT_EQ(a["ceiling_frames"].get<int>(), 3);
@@ -158,21 +160,26 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
   const cv::Mat plot = cv::imread((dir / "eval.png").string());
   EXPECT_EQ(plot.size(), cv::Size(960, 600));
   // A plot that is no PNG, and a ceiling file that is not one: one line naming the file, exit 2.
-  auto bad = runFlarekit({"fit-eval", model, (dir / "capture").string(), "--plot", (dir / "eval.jpg").string()});
+  auto bad = runFlarekit(
+      {"fit-eval", model, (dir / "capture").string(), "--plot", (dir / "eval.jpg").string()});
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_EQ(lineCount(bad.err), 1) << bad.err;
   EXPECT_NE(bad.err.find("eval.jpg"), std::string::npos) << bad.err;
   bad = runFlarekit({"fit-eval", model, (dir / "capture").string(), "--ceiling", model});
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_EQ(lineCount(bad.err), 1) << bad.err;
-  EXPECT_NE(bad.err.find("model.json: is not the output of flarekit fit-ceiling"), std::string::npos) << bad.err;
+  EXPECT_NE(bad.err.find("model.json: is not the output of flarekit fit-ceiling"),
+            std::string::npos)
+      << bad.err;
   // The ceiling measured on even frames only, and the odd ones evaluated: nothing to compare.
   bad = runFlarekit({"fit-eval", model, (dir / "capture").string(), "--frames", "odd", "--ceiling",
                      (dir / "ceiling.json").string()});
   EXPECT_EQ(bad.exit_code, 2);
-  EXPECT_NE(bad.err.find("ceiling.json: has no frame at the angles evaluated"), std::string::npos) << bad.err;
+  EXPECT_NE(bad.err.find("ceiling.json: has no frame at the angles evaluated"), std::string::npos)
+      << bad.err;
   // Frames without truth (an EXR stack) have no ceiling to compare with.
-  bad = runFlarekit({"fit-eval", model, (dir / "capture/frames").string(), "--ceiling", (dir / "ceiling.json").string()});
+  bad = runFlarekit({"fit-eval", model, (dir / "capture/frames").string(), "--ceiling",
+                     (dir / "ceiling.json").string()});
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("the capture has none"), std::string::npos) << bad.err;
 }
