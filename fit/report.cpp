@@ -84,10 +84,6 @@ cv::Mat ceilingSheet(const CeilingFrame& frame) {
                     lo, hi);
 }
 
-}  // namespace
-
-namespace {
-
 // A tick step of 1, 2 or 5 × 10^k giving about `count` ticks over `range`.
 double tickStep(double range, int count) {
   const double raw = range / count, decade = std::pow(10.0, std::floor(std::log10(raw)));
@@ -142,6 +138,7 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
       ceiling_colour(0, 130, 255), visible_colour(185, 185, 185), found_colour(60, 160, 50),
       unmatched_colour(50, 50, 210);
   cv::Mat image(600, 960, CV_8UC3, white);
+  if (ev.frames.empty()) return image;
   double a0 = std::numeric_limits<double>::infinity(), a1 = -a0, p0 = a0, p1 = -a0;
   int count_max = 1, unmatched_max = 0;
   auto psnrOf = [&](const FrameEvaluation& f) {
@@ -159,7 +156,6 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
     if (ev.has_truth)
       unmatched_max = std::max(unmatched_max, f.model_ghosts - f.model_ghosts_matched);
   }
-  if (ev.frames.empty()) return image;
   if (!(a1 > a0)) {
     a0 -= 0.5;
     a1 += 0.5;
@@ -219,11 +215,13 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
     cv::circle(image, run.back(), 2, fit_colour, cv::FILLED, cv::LINE_AA);
   }
   flush();
+  auto ceilingMarker = [&](cv::Point c) {
+    cv::rectangle(image, c - cv::Point(4, 4), c + cv::Point(4, 4), ceiling_colour, 2);
+  };
   bool has_ceiling = false;
   for (const auto& f : ev.frames)
     if (std::isfinite(f.ceiling_psnr_db)) {
-      const cv::Point c(top.px(f.angle_deg), top.py(f.ceiling_psnr_db));
-      cv::rectangle(image, c - cv::Point(4, 4), c + cv::Point(4, 4), ceiling_colour, 2);
+      ceilingMarker({top.px(f.angle_deg), top.py(f.ceiling_psnr_db)});
       has_ceiling = true;
     }
   // The legend, on the panel's title line (inside the panel it would hide points).
@@ -233,7 +231,7 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
               1, cv::LINE_AA);
   if (has_ceiling) {
     const cv::Point c = legend + cv::Point(142, 0);
-    cv::rectangle(image, c - cv::Point(4, 4), c + cv::Point(4, 4), ceiling_colour, 2);
+    ceilingMarker(c);
     cv::putText(image, "the model's ceiling (fit-ceiling)", c + cv::Point(12, 4),
                 cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1, cv::LINE_AA);
   }
