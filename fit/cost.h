@@ -144,7 +144,9 @@ class FramePyramid {
 // 22.5 / 15.6), the Tessar's recall rises most, the precision and PSNR fall:
 //   pixel noise everywhere:  Heliar 70.2 / 81.1 / 21.8 / 8.2,  Tessar 71.2 / 66.7 / 21.6 / 10.9;
 //   so, lowest level 12σ:    Heliar 69.6 / 85.1 / 21.9 / 10.1, Tessar 58.0 / 63.8 / 23.1 / 11.3;
-//   only where tracks end:   Heliar 74.7 / 85.0 / 21.6 / 11.1, Tessar 52.7 / 74.9 / 22.3 / 14.9.
+//   only where tracks end:   Heliar 74.7 / 85.0 / 21.6 / 11.1, Tessar 52.7 / 74.9 / 22.3 / 14.9;
+//   everywhere but the light: Heliar 68.8 / 81.9 / 24.0 / 8.5, Tessar 63.7 / 68.9 / 21.9 / 11.4
+//   (its zone and symmetric part on this estimate).
 // Each of those fits took 55–96 s wall, against 47–73 s with this estimate.
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
