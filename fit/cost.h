@@ -147,7 +147,8 @@ class FramePyramid {
 //   only where tracks end:   Heliar 74.7 / 85.0 / 21.6 / 11.1, Tessar 52.7 / 74.9 / 22.3 / 14.9;
 //   everywhere but the light: Heliar 68.8 / 81.9 / 24.0 / 8.5, Tessar 63.7 / 68.9 / 21.9 / 11.4
 //   (its zone and symmetric part on this estimate).
-// Each of those fits took 55–96 s wall, against 47–73 s with this estimate.
+// The first three's fits took 55–96 s wall each, against 47–73 s with this estimate (the fourth's
+// ran beside other builds).
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The noise σ of the pixels: 1.4826 / √2 × the median absolute difference of horizontal
