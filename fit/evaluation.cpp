@@ -734,7 +734,8 @@ void Evaluation::setCeiling(const std::vector<CeilingPoint>& ceiling) {
   for (auto& f : frames) {
     f.ceiling_psnr_db = kNaN;
     for (const auto& c : ceiling)
-      if (std::abs(c.angle_deg - f.angle_deg) <= 1e-6) f.ceiling_psnr_db = c.psnr_db;
+      if (std::abs(c.angle_deg - f.angle_deg) <= kAngleToleranceDeg)
+        f.ceiling_psnr_db = c.psnr_db;
     if (std::isfinite(f.ceiling_psnr_db) && std::isfinite(f.psnr_db))
       gaps.push_back(f.ceiling_psnr_db - f.psnr_db);
   }

@@ -112,8 +112,8 @@ struct Evaluation {
   int ceiling_frames = 0;
   double median_ceiling_gap_db = std::numeric_limits<double>::quiet_NaN();
 
-  // Sets each frame's ceiling_psnr_db from the point at its angle (within 1e-6°) and the summary
-  // above; frames without one keep NaN.
+  // Sets each frame's ceiling_psnr_db from the point at its angle (within kAngleToleranceDeg) and
+  // the summary above; frames without one keep NaN.
   void setCeiling(const std::vector<CeilingPoint>& ceiling);
 
   nlohmann::json toJson() const;

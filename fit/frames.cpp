@@ -20,8 +20,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr double kAngleTolerance = 1e-6;
-
 std::string fmt(double v) {
   std::ostringstream s;
   s << v;
@@ -33,7 +31,7 @@ void sortAndCheckAngles(std::vector<Frame>& frames) {
   std::stable_sort(frames.begin(), frames.end(),
                    [](const Frame& a, const Frame& b) { return a.angle_deg < b.angle_deg; });
   for (size_t i = 1; i < frames.size(); ++i) {
-    if (std::abs(frames[i].angle_deg - frames[i - 1].angle_deg) <= kAngleTolerance)
+    if (std::abs(frames[i].angle_deg - frames[i - 1].angle_deg) <= kAngleToleranceDeg)
       throw InputError(frames[i].file.string(),
                        "angle " + fmt(frames[i].angle_deg) + "° repeats that of " +
                            frames[i - 1].file.string());
@@ -131,7 +129,7 @@ bool FrameLoadOptions::IsValid(std::string* error) const {
 
 int FrameStack::findAngle(double angle_deg) const {
   for (size_t i = 0; i < frames.size(); ++i)
-    if (std::abs(frames[i].angle_deg - angle_deg) <= kAngleTolerance) return static_cast<int>(i);
+    if (std::abs(frames[i].angle_deg - angle_deg) <= kAngleToleranceDeg) return static_cast<int>(i);
   return -1;
 }
 

@@ -21,6 +21,10 @@
 
 namespace flarekit::fit {
 
+// Two rig angles this close are the same frame's (repeated angles in a stack, a frame looked up by
+// its angle, figures of one capture joined by angle).
+inline constexpr double kAngleToleranceDeg = 1e-6;
+
 // One frame of the stack, in memory.
 struct Frame {
   int index = 0;                      // position in the capture plan (or in the stack's file order)
@@ -42,7 +46,7 @@ struct FrameStack {
   std::filesystem::path source;       // the capture folder, or the first file of a stack
   std::vector<std::string> warnings;  // one line per frame left out or per oddity
 
-  // The index in `frames` of the frame at angle θ (within 1e-6°), or -1.
+  // The index in `frames` of the frame at angle θ (within kAngleToleranceDeg), or -1.
   int findAngle(double angle_deg) const;
 };
 
