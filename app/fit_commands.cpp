@@ -71,7 +71,7 @@ void registerFit(CLI::App& app) {
     std::string out, optimizer = "ceres", degree = "2", holdout, report;
     int threads = 2;
     double edge_weight = -1, shape_prior = -1;
-    bool light_symmetry = true, veils = false, glare = true;
+    bool light_symmetry = true, veils = false, glare = true, pixel_noise = false;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -96,6 +96,10 @@ void registerFit(CLI::App& app) {
   cmd->add_flag("--glare,!--no-glare", o->glare,
                 "Seed veiling glare, the smooth glow many faint veils sum to, as a ghost of its own with a "
                 "long fall-off (default), so the ghosts keep sharp outlines (fit/cost.h isGlare)");
+  cmd->add_flag(
+      "--pixel-noise", o->pixel_noise,
+      "Count thresholds in σ of the frame's pixel noise instead of the background's spread "
+      "(off by default: more ghosts found, fewer of the model's ghosts true; fit/fit_capture.h)");
   addStackOptions(cmd, o->stack);
   cmd->callback([o] {
     fit::FitOptions options;
@@ -119,6 +123,7 @@ void registerFit(CLI::App& app) {
     options.detection.light_symmetry = o->light_symmetry;
     options.detection.find_veils = o->veils;
     options.detection.find_glare = o->glare;
+    options.pixel_noise = o->pixel_noise;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
     checkWritable(o->out);  // before minutes of fitting, not after

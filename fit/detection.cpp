@@ -26,6 +26,7 @@ bool DetectionOptions::IsValid(std::string* error) const {
   if (!(zone_margin >= 1)) return fail("zone_margin must be ≥ 1");
   if (!(core_margin >= 1)) return fail("core_margin must be ≥ 1");
   if (!(light_smoothing_px >= 0)) return fail("light_smoothing_px must be ≥ 0");
+  if (!(light_residue_fraction >= 0)) return fail("light_residue_fraction must be ≥ 0");
   if (max_new_per_frame < 1) return fail("max_new_per_frame must be ≥ 1");
   if (veil_band_px < 0 || veil_window_px < 1) return fail("veil_band_px must be ≥ 0, veil_window_px ≥ 1");
   if (!(veil_step_sigma > 0)) return fail("veil_step_sigma must be > 0");
@@ -301,7 +302,7 @@ double flareAxisOffset(cv::Point2d point, const LightImage& light, cv::Size size
 
 std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& valid,
                                     double noise_sigma, const LightImage& light,
-                                    const DetectionOptions& options) {
+                                    const DetectionOptions& options, const cv::Mat& floor) {
   cv::Mat smooth;
   cv::GaussianBlur(residual, smooth, cv::Size(0, 0), options.smoothing_px, options.smoothing_px,
                    cv::BORDER_REPLICATE);
@@ -322,6 +323,7 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
   std::sort(levels.rbegin(), levels.rend());
   for (double level : levels) {
     cv::Mat mask = (smooth > level * noise_sigma) & (allowed > 0);
+    if (!floor.empty()) mask &= smooth > floor;
     cv::Mat labels, stats, centroids;
     const int n = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
     for (int i = 1; i < n; ++i) {

@@ -59,6 +59,13 @@ struct DetectionOptions {
   // Heliar capture (RMS of frame − S − true ghosts, 2°–6°): 0.46–0.52e-3 unsmoothed, 0.77–0.84e-3
   // at 0.5 px, 1.65–1.68e-3 at 1 px.
   double light_smoothing_px = 0;
+  // With the pixel noise (FitOptions::pixel_noise), a blob's pixels must also stand above this
+  // fraction of the light's estimated image there (estimateLightImage) (≥ 0; 0 = no such floor).
+  // The frame minus that estimate keeps a residue that grows with the light (its shot noise, the
+  // minimum's bias, wherever the light is not point-symmetric): near the core it stands far above
+  // the frame's pixel noise, and without the floor the fits drew it as ghosts. 0.5 measured worse
+  // than 0.25 (FitOptions::pixel_noise).
+  double light_residue_fraction = 0.25;
   // Also seed veils that fill the frame (detectVeilEdges; `flarekit fit --veils`). Off by
   // default, because the fitter is chaotic (a 1 % change of λ moves its median PSNR by 3 dB) and,
   // over three fits each (λ × 0.99, 1, 1.01) of the 640×427 captures (0–30° at 0.2°), the veils
@@ -147,10 +154,12 @@ struct Detection {
 };
 
 // Blobs of `residual` (CV_32FC1 luminance; frame minus the modelled ghosts), brightest first.
-// Seeds are grey (channels = 1); the caller spreads them over colour channels.
+// Seeds are grey (channels = 1); the caller spreads them over colour channels. Where `floor` is
+// given (CV_32FC1, the residual's size), a blob's pixels must also stand above it.
 std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& valid,
                                     double noise_sigma, const LightImage& light,
-                                    const DetectionOptions& options);
+                                    const DetectionOptions& options,
+                                    const cv::Mat& floor = cv::Mat());
 
 // Veiling glare (fit/cost.h isGlare): when the median of `residual` over the valid pixels away from
 // the light's clipped core is above glare_sigma × `noise_sigma`, a seed that covers the frame,

@@ -39,6 +39,23 @@ cv::Mat noisy(const std::vector<GhostParameters>& ghosts, cv::Size size, double 
 // through the image centre.
 const LightImage kNoLight;
 
+// Two discs on the axis at 30 σ: both found, or, under a floor that stands above the left one (the
+// light's residue there, FitOptions::pixel_noise), only the right one.
+TEST(DetectGhosts, KeepsBelowTheFloorOutAndFindsTheRest) {
+  const cv::Size size(320, 214);
+  const double sigma = 1e-3;
+  const cv::Mat residual =
+      noisy({disc(80, 107, 20, 30 * sigma), disc(240, 107, 20, 30 * sigma)}, size, sigma);
+  const cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  const auto both = detectGhosts(residual, valid, sigma, kNoLight, DetectionOptions{});
+  ASSERT_EQ(both.size(), 2u);
+  cv::Mat floor(size, CV_32F, cv::Scalar(0));
+  floor(cv::Rect(0, 0, 160, size.height)).setTo(40 * sigma);
+  const auto right = detectGhosts(residual, valid, sigma, kNoLight, DetectionOptions{}, floor);
+  ASSERT_EQ(right.size(), 1u);
+  EXPECT_NEAR(right[0].seed.center_x, 240, 3);
+}
+
 // A disc far larger than the frame, centred off its left side, shows one arc crossing the frame
 // at 15 σ on a pedestal of a second, fainter veil: one candidate, whose seed crosses the axis at
 // the arc and reaches to the left (where the veil is).

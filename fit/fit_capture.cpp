@@ -945,7 +945,9 @@ class CaptureFitter {
   double noiseOf(int pos) {
     auto it = noise_.find(pos);
     if (it != noise_.end()) return it->second;
-    return noise_[pos] = estimateNoiseSigma(frame(pos).image, frame(pos).valid);
+    const Frame& f = frame(pos);
+    return noise_[pos] = options_.pixel_noise ? estimatePixelNoiseSigma(f.image, f.valid)
+                                              : estimateNoiseSigma(f.image, f.valid);
   }
 
   // The frame minus the light's own image S (detection.h estimateLightImage, from the frame
@@ -1090,6 +1092,25 @@ class CaptureFitter {
 
   int detectionFactor() const { return detectionLevel(stack_.size); }
 
+  // With the pixel noise, the level detection must also clear where the light is
+  // (DetectionOptions::light_residue_fraction): that fraction of the light's estimated image at
+  // `level` (the frame there minus the frame without the light), smoothed as detection smooths
+  // the residual. Empty otherwise.
+  cv::Mat lightResidueFloor(int pos, const FrameData& level) const {
+    const double fraction = options_.detection.light_residue_fraction;
+    if (!options_.pixel_noise || !(fraction > 0)) return {};
+    const int k = level.factor;
+    cv::Mat frame_level;
+    cv::resize(frame(pos).image(cv::Rect(0, 0, level.image.cols * k, level.image.rows * k)),
+               frame_level, level.image.size(), 0, 0, cv::INTER_AREA);
+    cv::Mat with_light = luminance(frame_level), without_light = luminance(level.image);
+    cv::patchNaNs(with_light, 0);
+    cv::patchNaNs(without_light, 0);
+    cv::Mat light = with_light - without_light;
+    cv::GaussianBlur(light, light, cv::Size(0, 0), options_.detection.smoothing_px);
+    return cv::max(light, 0) * fraction;
+  }
+
   // The residual (luminance) of the frame minus `ghosts` at level `level.factor`.
   cv::Mat residualAt(const FrameData& level, const std::vector<GhostParameters>& ghosts) const {
     model::ViewTransform view;
@@ -1111,7 +1132,8 @@ class CaptureFitter {
     record.light_center = light_full.center;
     record.light_zone_px = light_full.zone_radius_px;
     const LightImage light = light_full.atLevel(kd);
-    auto candidates = detectGhosts(residual, level.valid, level.noise_sigma, light, options_.detection);
+    auto candidates = detectGhosts(residual, level.valid, level.noise_sigma, light,
+                                   options_.detection, lightResidueFloor(pos, level));
     if (options_.detection.find_veils)
       for (auto& veil : detectVeilEdges(residual, level.valid, level.noise_sigma, light, options_.detection))
         candidates.push_back(std::move(veil));

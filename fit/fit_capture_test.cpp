@@ -330,6 +330,45 @@ TEST(FitCapture, RecoversMovingGhostsInMemory) {
   EXPECT_FALSE(r.summary.BriefReport().empty());
 }
 
+// With pixel_noise the fitter counts in the frame's pixel noise: on frames whose background is a
+// slope (as veils make it), the background's spread is over 1.5× the pixel noise of 0.01.
+TEST(FitCapture, WithThePixelNoiseCountsInTheFramesPixelNoise) {
+  FrameStack stack = testStack();
+  cv::theRNG().state = 5;
+  cv::Mat slope(stack.size, CV_32F);
+  for (int y = 0; y < slope.rows; ++y)
+    for (int x = 0; x < slope.cols; ++x) slope.at<float>(y, x) = 0.0005f * x;
+  for (int i = 0; i < 9; ++i) {
+    Frame f = ghostFrame(stack, i, 0.25 * i, {ghostAt(50 + 2 * i, 1, 0.4)});
+    f.image += slope;
+    addNoise(f, 0.01);
+    stack.frames.push_back(f);
+  }
+  FitOptions options;
+  options.progress = false;
+  for (const bool pixel : {false, true}) {
+    options.pixel_noise = pixel;
+    const FitResult r = fitCapture(stack, options);
+    ASSERT_EQ(r.frames.size(), stack.frames.size());
+    for (size_t i = 0; i < r.frames.size(); ++i) {
+      const Frame& f = stack.frames[r.frames[i].frame];
+      const double pixel_sigma = estimatePixelNoiseSigma(f.image, f.valid);
+      EXPECT_NEAR(pixel_sigma, 0.01, 0.0015);
+      if (pixel) {
+        EXPECT_EQ(r.frames[i].noise_sigma, pixel_sigma);
+      } else {
+        EXPECT_EQ(r.frames[i].noise_sigma, estimateNoiseSigma(f.image, f.valid));
+        EXPECT_GT(r.frames[i].noise_sigma, 1.5 * pixel_sigma);
+      }
+    }
+    // The ghost is found either way (the slope is drawn by other ghosts, which this does not test).
+    int found = 0;
+    for (const auto& g : r.model.ghostsAt(1.0))
+      found += std::abs(g.parameters.center_x - 58) < 0.5 && std::abs(g.parameters.left - 15) < 0.5;
+    EXPECT_EQ(found, 1) << "pixel noise " << pixel;
+  }
+}
+
 // A sharp ghost on a broad glow (what many veils, each too faint to see, sum to): the model holds
 // the ghost where it is with its sharp outline, and the glow apart from it as glare.
 TEST(FitCapture, HoldsASharpGhostApartFromTheGlowUnderIt) {
