@@ -135,8 +135,9 @@ class FramePyramid {
 // test frames (0.0061 for 0.01), 2.7× the background's on lit Heliar frames, 5–10× once the light
 // has left the frame (14–16°: frame-filling veils make the spread); an estimate from differences
 // of horizontal neighbours was within 30 % on all three (estimatePixelNoiseSigma). The fitter
-// keeps this one for now: switched to the pixel noise, its detection levels (in σ) find the sum
-// of the faint veils as one frame-filling blob, and on the 640×427 0–30° captures the median PSNR
+// keeps this one by default (FitOptions::pixel_noise switches): switched to the pixel noise, its
+// detection levels (in σ) find the sum of the faint veils as one frame-filling blob, and on the
+// 640×427 0–30° captures the median PSNR
 // went 22.2 → 25.2 dB on the Heliar (inside the 22.2–25.1 dB that λ ± 1 % alone gives) but
 // 22.9 → 19.3 dB on the Tessar, whose precision fell 80 → 68 %. Measured again with the fitter
 // of 6528a83 (model's recall / precision / median PSNR / median centroid error, means over
@@ -146,9 +147,24 @@ class FramePyramid {
 //   so, lowest level 12σ:    Heliar 69.6 / 85.1 / 21.9 / 10.1, Tessar 58.0 / 63.8 / 23.1 / 11.3;
 //   only where tracks end:   Heliar 74.7 / 85.0 / 21.6 / 11.1, Tessar 52.7 / 74.9 / 22.3 / 14.9;
 //   everywhere but the light: Heliar 68.8 / 81.9 / 24.0 / 8.5, Tessar 63.7 / 68.9 / 21.9 / 11.4
-//   (its zone and symmetric part on this estimate).
-// The first three's fits took 55–96 s wall each, against 47–73 s with this estimate (the fourth's
-// ran beside other builds).
+//   (its zone and symmetric part on this estimate);
+//   everywhere, detection also kept off the light's residue (FitOptions::pixel_noise, 9bddd08):
+//                            Heliar 74.1 / 82.4 / 23.3 / 7.9,  Tessar 71.1 / 69.0 / 21.9 / 10.1.
+// Variants of the last (scratch switches on its fitter), none better on all four figures:
+//   the floor at 0.5 × the light: Heliar 75.3 / 83.4 / 23.4 / 9.5, Tessar 62.8 / 63.9 / 22.6 /
+//     11.2;
+//   at 0.1 × the light and the ghosts modelled so far (the model's own error): Heliar 71.4 /
+//     83.7 / 22.1 / 9.0, Tessar 72.1 / 64.1 / 21.7 / 10.8;
+//   the cost's scale floor (3σ) on this estimate: Heliar 70.0 / 77.9 / 23.1 / 11.8, Tessar 67.5 /
+//     64.2 / 22.6 / 11.9 (so, without the light's residue floor: Heliar 72.7 / 80.5 / 22.3 / 6.5,
+//     Tessar 63.2 / 66.7 / 23.0 / 12.4);
+//   detection levels in a σ(I) map instead of the floor, the pixel noise binned by the smoothed
+//     brightness (shot noise, and the light's steep halo, raise it near the core): Heliar 64.4 /
+//     82.3 / 20.9 / 9.4, Tessar 62.0 / 76.4 / 21.5 / 11.5;
+//   this estimate while the light is found in the frame, the pixel noise after (no floor): Heliar
+//     73.6 / 82.7 / 22.5 / 7.3, Tessar 65.5 / 74.5 / 21.4 / 12.1.
+// The first three's fits took 55–96 s wall each, against 47–73 s with this estimate; the later
+// ones' ran beside builds and other fits, so their times are not compared.
 double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The noise σ of the pixels: 1.4826 / √2 × the median absolute difference of horizontal
