@@ -137,9 +137,9 @@ class FramePyramid {
 // of horizontal neighbours was within 30 % on all three (estimatePixelNoiseSigma). The fitter
 // keeps this one by default (FitOptions::pixel_noise switches): switched to the pixel noise, its
 // detection levels (in σ) find the sum of the faint veils as one frame-filling blob, and on the
-// 640×427 0–30° captures the median PSNR
-// went 22.2 → 25.2 dB on the Heliar (inside the 22.2–25.1 dB that λ ± 1 % alone gives) but
-// 22.9 → 19.3 dB on the Tessar, whose precision fell 80 → 68 %. Measured again with the fitter
+// 640×427 0–30° captures the median PSNR went 22.2 → 25.2 dB on the Heliar (inside the
+// 22.2–25.1 dB that λ ± 1 % alone gives) but 22.9 → 19.3 dB on the Tessar, whose precision fell
+// 80 → 68 %. Measured again with the fitter
 // of 6528a83 (model's recall / precision / median PSNR / median centroid error, means over
 // λ × 0.99, 1, 1.01; this estimate: Heliar 71.2 / 86.5 % / 24.0 dB / 8.8 px, Tessar 51.4 / 78.0 /
 // 22.5 / 15.6), the Tessar's recall rises most, the precision and PSNR fall:
