@@ -71,7 +71,7 @@ void registerFit(CLI::App& app) {
     std::string out, optimizer = "ceres", degree = "2", holdout, report;
     int threads = 2;
     double edge_weight = -1, shape_prior = -1;
-    bool light_symmetry = true, veils = false, glare = true, pixel_noise = false;
+    bool light_symmetry = true, veils = false, glare = true, pixel_noise = true;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -97,9 +97,9 @@ void registerFit(CLI::App& app) {
                 "Seed veiling glare, the smooth glow many faint veils sum to, as a ghost of its own with a "
                 "long fall-off (default), so the ghosts keep sharp outlines (fit/cost.h isGlare)");
   cmd->add_flag(
-      "--pixel-noise", o->pixel_noise,
-      "Count thresholds in σ of the frame's pixel noise instead of the background's spread "
-      "(off by default: more ghosts found, fewer of the model's ghosts true; fit/fit_capture.h)");
+      "--pixel-noise,!--no-pixel-noise", o->pixel_noise,
+      "Count thresholds in σ of the frame's pixel noise (default), or in the background's spread "
+      "(fewer ghosts found, more of the model's ghosts true; fit/fit_capture.h)");
   addStackOptions(cmd, o->stack);
   cmd->callback([o] {
     fit::FitOptions options;

@@ -135,7 +135,8 @@ class FramePyramid {
 // test frames (0.0061 for 0.01), 2.7× the background's on lit Heliar frames, 5–10× once the light
 // has left the frame (14–16°: frame-filling veils make the spread); an estimate from differences
 // of horizontal neighbours was within 30 % on all three (estimatePixelNoiseSigma). The fitter
-// keeps this one by default (FitOptions::pixel_noise switches): switched to the pixel noise, its
+// counts in that one by default since glare has its own end rules (FitOptions::pixel_noise, whose
+// comment has the figures; this one with --no-pixel-noise). Switched to the pixel noise first, its
 // detection levels (in σ) find the sum of the faint veils as one frame-filling blob, and on the
 // 640×427 0–30° captures the median PSNR went 22.2 → 25.2 dB on the Heliar (inside the
 // 22.2–25.1 dB that λ ± 1 % alone gives) but 22.9 → 19.3 dB on the Tessar, whose precision fell

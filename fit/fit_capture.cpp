@@ -691,6 +691,44 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
   return done;
 }
 
+namespace {
+
+double peakOf(const GhostParameters& g) {
+  double p = 0;
+  for (int c = 0; c < g.channels; ++c) p = std::max({p, g.border[c], g.inside[c]});
+  return p;
+}
+
+}  // namespace
+
+std::string trackEndReason(const GhostParameters& g, cv::Size image_size, double noise_sigma,
+                           const TrackingOptions& options) {
+  const cv::Rect2d box = model::outlineBounds(g);
+  const cv::Rect2d image(0, 0, image_size.width, image_size.height);
+  const bool sank = peakOf(g) < options.min_peak_sigma * noise_sigma;
+  if (isGlare(g, image_size)) {
+    // Glare's outline is no ghost's: it is the glow's core, and frames at 10–30° on the Heliar
+    // 640×427 capture were best drawn by an outline wider than the frame (R 755 px at 10°), one
+    // side at its 0.5 px bound, or a centre outside the image with the glow reaching in. Ended by
+    // the sharp ghost's rules there, the glare lived 3–11 frames at a time and half the frames
+    // from 9° on had none, though the glow of the veils too faint to see holds most of their flare
+    // (one glare fitted to it alone: 31–46 dB at 12–28°, without it 4–17 dB).
+    const double fo = g.outside_falloff;
+    const cv::Rect2d reach(box.x - fo, box.y - fo, box.width + 2 * fo, box.height + 2 * fo);
+    if ((reach & image).area() <= 0) return "left the image";
+    return sank ? "sank into the noise" : "";
+  }
+  const double inside = (box & image).area();
+  if (box.area() <= 0 || inside < options.min_visible_fraction * box.area())
+    return "left the image";
+  if (sank) return "sank into the noise";
+  const double diag = std::hypot(image_size.width, image_size.height);
+  if (std::max({g.left, g.right, g.height}) > 0.98 * diag ||
+      std::min({g.left, g.right, g.height}) < 0.6)
+    return "fit broke down (size at its bound)";
+  return "";
+}
+
 // ── The capture fitter ────────────────────────────────────────────────────────────────────────
 
 namespace {
@@ -724,12 +762,6 @@ bool sameBits(const GhostParameters& a, const GhostParameters& b) {
   const std::vector<double> va = model::toParameterVector(a), vb = model::toParameterVector(b);
   return a.channels == b.channels && va.size() == vb.size() &&
          std::memcmp(va.data(), vb.data(), va.size() * sizeof(double)) == 0;
-}
-
-double peakOf(const GhostParameters& g) {
-  double p = 0;
-  for (int c = 0; c < g.channels; ++c) p = std::max({p, g.border[c], g.inside[c]});
-  return p;
 }
 
 class CaptureFitter {
@@ -828,18 +860,8 @@ class CaptureFitter {
     return g;
   }
 
-  // Why a fitted ghost ends here, or "" when it goes on.
   std::string endReason(const GhostParameters& g, double noise_sigma) const {
-    const cv::Rect2d box = model::outlineBounds(g);
-    const cv::Rect2d image(0, 0, stack_.size.width, stack_.size.height);
-    const double inside = (box & image).area();
-    if (box.area() <= 0 || inside < options_.tracking.min_visible_fraction * box.area())
-      return "left the image";
-    if (peakOf(g) < options_.tracking.min_peak_sigma * noise_sigma) return "sank into the noise";
-    const double diag = std::hypot(stack_.size.width, stack_.size.height);
-    if (std::max({g.left, g.right, g.height}) > 0.98 * diag || std::min({g.left, g.right, g.height}) < 0.6)
-      return "fit broke down (size at its bound)";
-    return "";
+    return trackEndReason(g, stack_.size, noise_sigma, options_.tracking);
   }
 
   // Fits `ghosts` jointly per overlapping group; updates them in place.

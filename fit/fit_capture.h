@@ -18,8 +18,9 @@
 //     the ghosts known there.
 //  3. A track ends where the ghost leaves the image (less than min_visible_fraction of its box
 //     inside), sinks into the noise (its peak below min_peak_sigma noise σ), or the fit breaks
-//     down (a size at its bound). Identities are kept where ghosts cross because each ghost keeps
-//     its own parameter block seeded from its own extrapolation.
+//     down (a size at its bound): trackEndReason. Glare ends only where it leaves the image or
+//     sinks into the noise. Identities are kept where ghosts cross because each ghost keeps its
+//     own parameter block seeded from its own extrapolation.
 //  4. Polynomials per ghost and parameter over its tracked range (degree 2 by default, or chosen
 //     1–4 by held-out error).
 
@@ -80,18 +81,21 @@ struct FitOptions {
   // zone, the cost's scale floor) in σ of the frame's pixel noise (estimatePixelNoiseSigma: the σ
   // by which fit-eval calls a ghost visible) instead of the background's spread
   // (estimateNoiseSigma, 2–9× that once veils fill the frame), and keep detection off the light's
-  // residue (DetectionOptions::light_residue_fraction); `flarekit fit --pixel-noise`. Off by
-  // default: more ghosts found on both lenses, but fewer of the model's ghosts true and a lower
-  // PSNR. On the 640×427 captures (0–30° at 0.2°), means over λ × 0.99, 1, 1.01 of the model's
-  // recall / precision / median PSNR / median centroid error, off → on:
-  //   Heliar Tronnier: 71.2 → 74.1 %, 86.5 → 82.4 %, 24.0 → 23.3 dB, 8.8 → 7.9 px;
-  //   Brendel Tessar:  51.4 → 71.1 %, 78.0 → 69.0 %, 22.5 → 21.9 dB, 15.6 → 10.1 px;
-  // the frames' own fits' PSNR 26.7 → 28.5 dB and 25.9 → 26.7 dB. Where the light is in the frame
-  // (0–9°) the Tessar's fits draw ghost 15's bright core, whose body the model cannot hold, with
-  // several ghosts, 3–7 a frame matched to no true ghost; from 9° on, where the veils fill the
-  // frame, they find the ghosts of 12–20 pixel σ that the background's σ hides. The pixel noise
-  // alone, without the floor: Heliar 70.2 / 81.1 / 21.8 / 8.2, Tessar 71.2 / 66.7 / 21.6 / 10.9.
-  bool pixel_noise = false;
+  // residue (DetectionOptions::light_residue_fraction); `flarekit fit --no-pixel-noise` turns it
+  // off. On the 640×427 captures (0–30° at 0.2°), means over λ × 0.99, 1, 1.01 of the model's
+  // recall / precision / median PSNR / median centroid error, off → on (with glare ended by its
+  // own rules, trackEndReason):
+  //   Heliar Tronnier: 67.8 → 79.4 %, 83.5 → 82.2 %, 25.0 → 24.2 dB, 9.2 → 8.6 px;
+  //   Brendel Tessar:  51.3 → 78.1 %, 79.3 → 69.1 %, 22.6 → 23.5 dB, 11.7 → 11.3 px;
+  // the frames' own fits' PSNR 26.9 → 27.8 dB and 24.0 → 27.3 dB; the fit takes about a third
+  // longer (more ghosts). Where the light is in the frame (0–9°) the Tessar's fits draw ghost 15's
+  // bright core, whose body the model cannot hold, with several ghosts, 3–7 a frame matched to no
+  // true ghost; from 9° on, where the veils fill the frame, they find the ghosts of 12–20 pixel σ
+  // that the background's σ hides. Before glare had its own end rules, on was the better in
+  // recall and centroid only: Heliar 71.2 → 74.1 %, 86.5 → 82.4 %, 24.0 → 23.3 dB, 8.8 → 7.9 px,
+  // Tessar 51.4 → 71.1 %, 78.0 → 69.0 %, 22.5 → 21.9 dB, 15.6 → 10.1 px. The pixel noise alone,
+  // without the light's floor: Heliar 70.2 / 81.1 / 21.8 / 8.2, Tessar 71.2 / 66.7 / 21.6 / 10.9.
+  bool pixel_noise = true;
   // Threads for the model renderer (≥ 1); the fit is the same for any number.
   int threads = 2;
   // Progress on stderr.
@@ -197,6 +201,15 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
                                                               const model::CaptureInfo& info,
                                                               int channels, int degree,
                                                               int min_frames, int first_new_id);
+
+// Why a track ends at fitted ghost `g` in a frame of noise σ `noise_sigma`, or "" when it goes
+// on: "left the image" (less than min_visible_fraction of its outline's box in the image),
+// "sank into the noise" (its peak max(Ib, Ii) below min_peak_sigma σ), "fit broke down (size at
+// its bound)" (L, R or h beyond 0.98 of the image's diagonal or below 0.6 px). Glare (fit/cost.h
+// isGlare) has no outline to break down: it leaves the image only when its outline's box grown
+// by its outside fall-off misses the image, and its sizes may sit at their bounds.
+std::string trackEndReason(const model::GhostParameters& g, cv::Size image_size, double noise_sigma,
+                           const TrackingOptions& options);
 
 // The frame minus the light's own image (detection.h estimateLightImage, from the frame alone):
 // what the fitter detects and fits ghosts in. The frame itself without a light in it or with

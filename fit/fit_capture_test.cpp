@@ -243,6 +243,48 @@ TEST(SplitTracks, ATrackThatJumpsToAnotherGhostBecomesTwo) {
   EXPECT_EQ(splitTracksPolynomialsCannotFollow({smooth}, info, 1, 2, 3, 10).size(), 1u);
 }
 
+// A sharp ghost ends where its fit runs to a size bound or out of the image. Glare, the glow
+// of the veils too faint to see, does not: its outline may be wider than the frame, one side at
+// 0.5 px, or its centre outside the image with its fall-off reaching in; it ends only where that
+// reach misses the image, or where it sinks into the noise.
+TEST(TrackEndReason, EndsASharpGhostAtItsSizeBoundsButGlareOnlyOutOfReachOrInTheNoise) {
+  const cv::Size size(640, 427);  // diagonal 769 px
+  const double sigma = 1e-3;
+  const TrackingOptions options;
+  auto ghost = [](double mx, double l, double r, double h, double fo, double intensity) {
+    model::GhostParameters g;
+    g.center_x = mx;
+    g.center_y = 213;
+    g.left = l;
+    g.right = r;
+    g.height = h;
+    g.border = {intensity, 0, 0};
+    g.inside = {intensity, 0, 0};
+    g.outside_falloff = fo;
+    return g;
+  };
+  const double sharp = 5, glow = 400;
+  ASSERT_FALSE(isGlare(ghost(320, 100, 100, 100, sharp, 0.1), size));
+  ASSERT_TRUE(isGlare(ghost(320, 100, 100, 100, glow, 0.1), size));
+  const std::string broke = "fit broke down (size at its bound)";
+  for (double fo : {sharp, glow}) {
+    SCOPED_TRACE(fo);
+    const bool glare = fo == glow;
+    EXPECT_EQ(trackEndReason(ghost(320, 100, 100, 100, fo, 0.1), size, sigma, options), "");
+    EXPECT_EQ(trackEndReason(ghost(320, 100, 760, 300, fo, 0.1), size, sigma, options),
+              glare ? "" : broke);
+    EXPECT_EQ(trackEndReason(ghost(320, 0.5, 200, 300, fo, 0.1), size, sigma, options),
+              glare ? "" : broke);
+    // Centre 640 px left of the frame, outline 300 px across: only the glow reaches in.
+    EXPECT_EQ(trackEndReason(ghost(-640, 300, 300, 300, fo, 0.1), size, sigma, options),
+              glare ? "" : "left the image");
+    EXPECT_EQ(trackEndReason(ghost(-1500, 300, 300, 300, fo, 0.1), size, sigma, options),
+              "left the image");
+    EXPECT_EQ(trackEndReason(ghost(320, 100, 100, 100, fo, 3 * sigma), size, sigma, options),
+              "sank into the noise");
+  }
+}
+
 TEST(BuildFlareModel, RangesReachHalfwayToTheNeighbouringFrames) {
   // Tracks fitted at 1.0–2.0° and 2.5–3.0° in frames 0.5° apart, the capture 0–3°: the first ghost
   // exists up to 2.25°, the second from there on, and the capture's end bounds the second.
