@@ -710,7 +710,7 @@ std::string trackEndReason(const GhostParameters& g, cv::Size image_size, double
     // Glare's outline is no ghost's: it is the glow's core, and frames at 10–30° on the Heliar
     // 640×427 capture were best drawn by an outline wider than the frame (R 755 px at 10°), one
     // side at its 0.5 px bound, or a centre outside the image with the glow reaching in. Ended by
-    // the sharp ghost's rules there, the glare lived 3–11 frames at a time and 53 of the 106
+    // the sharp ghost's rules there, the glare lived 4–19 frames at a time and 53 of the 106
     // frames from 9° on had none (58 counting in the pixel noise; with these rules 18 and 20),
     // though the glow of the veils too faint to see holds most of their flare (one glare fitted to
     // that glow alone, the visible ghosts exact: 31–46 dB at 12–28°; without a glare 4–17 dB).
