@@ -714,9 +714,9 @@ std::string trackEndReason(const GhostParameters& g, cv::Size image_size, double
     // frames from 9° on had none (58 counting in the pixel noise; with these rules 18 and 20),
     // though the glow of the veils too faint to see holds most of their flare (one glare fitted to
     // that glow alone, the visible ghosts exact: 31–46 dB at 12–28°; without a glare 4–17 dB).
-    const double fo = g.outside_falloff;
-    const cv::Rect2d reach(box.x - fo, box.y - fo, box.width + 2 * fo, box.height + 2 * fo);
-    if ((reach & image).area() <= 0) return "left the image";
+    // The pixels it reaches: its outline's box grown by its outside fall-off.
+    if ((model::ghostPixelBounds(g) & cv::Rect(0, 0, image_size.width, image_size.height)).empty())
+      return "left the image";
     return sank ? "sank into the noise" : "";
   }
   const double inside = (box & image).area();
