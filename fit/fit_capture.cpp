@@ -703,8 +703,6 @@ double peakOf(const GhostParameters& g) {
 
 std::string trackEndReason(const GhostParameters& g, cv::Size image_size, double noise_sigma,
                            const TrackingOptions& options) {
-  const cv::Rect2d box = model::outlineBounds(g);
-  const cv::Rect2d image(0, 0, image_size.width, image_size.height);
   const bool sank = peakOf(g) < options.min_peak_sigma * noise_sigma;
   if (isGlare(g, image_size)) {
     // Glare's outline is no ghost's: it is the glow's core, and frames at 10–30° on the Heliar
@@ -715,10 +713,12 @@ std::string trackEndReason(const GhostParameters& g, cv::Size image_size, double
     // though the glow of the veils too faint to see holds most of their flare (one glare fitted to
     // that glow alone, the visible ghosts exact: 31–46 dB at 12–28°; without a glare 4–17 dB).
     // The pixels it reaches: its outline's box grown by its outside fall-off.
-    if ((model::ghostPixelBounds(g) & cv::Rect(0, 0, image_size.width, image_size.height)).empty())
+    if ((model::ghostPixelBounds(g) & cv::Rect(cv::Point(), image_size)).empty())
       return "left the image";
     return sank ? "sank into the noise" : "";
   }
+  const cv::Rect2d box = model::outlineBounds(g);
+  const cv::Rect2d image(0, 0, image_size.width, image_size.height);
   const double inside = (box & image).area();
   if (box.area() <= 0 || inside < options.min_visible_fraction * box.area())
     return "left the image";
