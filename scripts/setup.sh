@@ -26,6 +26,7 @@ packages=(
   libumockdev-dev umockdev                    # driver tests without hardware
   libtinygltf-dev                             # glTF scenes (predict/)
   chromium                                    # the report's browser test (predict/)
+  jq                                          # bench/fit_accuracy.sh
 )
 
 missing=()
