@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <stdexcept>
 
 #include <opencv2/imgproc.hpp>
 
@@ -144,6 +145,80 @@ LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double nois
   light.zone_radius_px = zone * options.zone_margin;
   light.center = refineLightCenter(luminance, valid, light, options);
   return light;
+}
+
+std::vector<LightImage> followLight(std::vector<LightImage> found, const std::vector<double>& angles_deg,
+                                    cv::Size size) {
+  const int n = static_cast<int>(found.size());
+  if (static_cast<int>(angles_deg.size()) != n) throw std::invalid_argument("followLight: one angle per frame");
+  std::vector<double> cores;
+  for (const LightImage& l : found)
+    if (l.found) cores.push_back(l.core_radius_px);
+  if (cores.empty()) return found;
+  std::nth_element(cores.begin(), cores.begin() + cores.size() / 2, cores.end());
+  const double median_core = cores[cores.size() / 2];
+  constexpr double kMarginPx = 2, kMaxGapDeg = 3;
+  constexpr int kNeighbours = 8, kMinNeighbours = 4;
+  auto clear = [&](const LightImage& l) {
+    const double r = std::max(l.core_radius_px, median_core) + kMarginPx;
+    return l.found && l.center.x > r && l.center.y > r && l.center.x + r < size.width && l.center.y + r < size.height;
+  };
+  std::vector<int> clear_frames;
+  for (int i = 0; i < n; ++i)
+    if (clear(found[i])) clear_frames.push_back(i);
+  std::vector<LightImage> lights = found;
+  for (int i = 0; i < n; ++i) {
+    if (clear(found[i])) continue;
+    std::vector<int> near = clear_frames;
+    std::sort(near.begin(), near.end(), [&](int a, int b) {
+      return std::abs(angles_deg[a] - angles_deg[i]) < std::abs(angles_deg[b] - angles_deg[i]);
+    });
+    if (static_cast<int>(near.size()) > kNeighbours) near.resize(kNeighbours);
+    if (static_cast<int>(near.size()) < kMinNeighbours || std::abs(angles_deg[near[0]] - angles_deg[i]) > kMaxGapDeg)
+      continue;
+    // Least squares line through the centres, in θ − θ_i.
+    double s1 = 0, st = 0, stt = 0, sx = 0, stx = 0, sy = 0, sty = 0, core = 0, zone = 0;
+    for (int k : near) {
+      const double t = angles_deg[k] - angles_deg[i];
+      s1 += 1;
+      st += t;
+      stt += t * t;
+      sx += found[k].center.x;
+      stx += t * found[k].center.x;
+      sy += found[k].center.y;
+      sty += t * found[k].center.y;
+      core += found[k].core_radius_px;
+      zone += found[k].zone_radius_px;
+    }
+    const double det = s1 * stt - st * st;
+    if (!(std::abs(det) > 1e-12)) continue;  // every neighbour at one angle
+    LightImage l;
+    l.found = true;
+    l.predicted = true;
+    l.center = {(stt * sx - st * stx) / det, (stt * sy - st * sty) / det};  // the lines at t = 0
+    l.core_radius_px = core / s1;
+    l.zone_radius_px = zone / s1;
+    const double dx = std::max({0.0, -l.center.x, l.center.x - size.width});
+    const double dy = std::max({0.0, -l.center.y, l.center.y - size.height});
+    if (std::hypot(dx, dy) < l.zone_radius_px) lights[i] = l;
+  }
+  return lights;
+}
+
+cv::Mat validBesideLight(const cv::Mat& valid, const LightImage& light) {
+  if (!light.found || !light.predicted) return valid;
+  cv::Mat out = valid.clone();
+  const cv::Point2d c = light.center;
+  for (int y = 0; y < out.rows; ++y) {
+    uchar* v = out.ptr<uchar>(y);
+    for (int x = 0; x < out.cols; ++x) {
+      const double px = x + 0.5, py = y + 0.5;
+      if (std::hypot(px - c.x, py - c.y) > light.zone_radius_px) continue;
+      const double mx = 2 * c.x - px, my = 2 * c.y - py;
+      if (mx < 0 || my < 0 || mx >= out.cols || my >= out.rows) v[x] = 0;
+    }
+  }
+  return out;
 }
 
 cv::Mat estimateLightImage(const cv::Mat& residual, const cv::Mat& valid, const LightImage& light,

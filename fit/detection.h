@@ -103,6 +103,9 @@ struct LightImage {
   cv::Point2d center;        // image pixels
   double zone_radius_px = 0; // core + halo + starburst: detection keeps out of this disc
   double core_radius_px = 0; // the clipped core (radius of a disc of its area)
+  // The core is cut by the frame's border, and centre and radii come from the frames beside it
+  // (followLight), not from this frame's saturated pixels.
+  bool predicted = false;
 
   // The same light on a level of k×k pixel averages (positions and radii divided by k).
   LightImage atLevel(int factor) const {
@@ -123,6 +126,28 @@ double flareAxisOffset(cv::Point2d point, const LightImage& light, cv::Size size
 // azimuthal median profile around it. `valid` is the frame's mask (0 = saturated / non-finite).
 LightImage findLight(const cv::Mat& luminance, const cv::Mat& valid, double noise_sigma,
                      const DetectionOptions& options);
+
+// The light in every frame of a sweep, from what findLight found in each (`found`, at the rig
+// angles `angles_deg`, in degrees). Where the clipped core touches the frame's border, the
+// centroid of its visible part is not the light's centre: on the Heliar 640×427 capture findLight
+// put it at x = 13–33 px over 9.2–11.8° while the light left the frame by 6 px per 0.2°, and its y
+// wandered by up to 30 px as the starburst's spikes became the largest clipped blob. S
+// (estimateLightImage) about that centre left the spikes in the data, and they were fitted as
+// ghosts 10–100× brighter than the flare (PSNR against the noise-free flare −6 to 18 dB at λ ×
+// 0.99). There the light is the straight line through its centres in the (up to) 8 frames nearest
+// in angle whose core, of at least the sweep's median core radius, is clear of the border by
+// 2 px, within 3° (the image moves ∝ tan θ, nearly straight over a few degrees), with their mean
+// core and zone radii; `predicted` is set. A frame whose predicted zone misses the image, or with
+// too few clear frames near it, keeps what was found.
+std::vector<LightImage> followLight(std::vector<LightImage> found, const std::vector<double>& angles_deg,
+                                    cv::Size size);
+
+// `valid` (CV_8U, the frame's mask) without the pixels where the light cannot be told from the
+// ghosts: for a predicted light (followLight), those within its zone whose mirror point about the
+// light lies outside the frame. S has no reflection to compare them with, and the radial profile
+// it falls back on (estimateLightImage) does not hold where the core itself is cut. `valid` for a
+// light that was found.
+cv::Mat validBesideLight(const cv::Mat& valid, const LightImage& light);
 
 // The light's own image in `residual` (CV_32FC1/3: the frame minus the ghosts modelled so far):
 // its clipped core, halo and starburst. Those are point-symmetric about the light's image centre c

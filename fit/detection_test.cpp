@@ -164,5 +164,76 @@ TEST(EstimateLightImage, TakesTheLightAwayWhereItsMirrorIsOutsideTheFrame) {
   EXPECT_NEAR(cv::mean(rest(cv::Rect(162, 72, 16, 16)))[0], 30 * sigma, 1 * sigma);
 }
 
+// A light leaving the frame as the rig turns (50 px per degree, core 35 px, zone 90 px): where the
+// core touches the border, findLight's centroid of the visible clipped pixels stays near the edge
+// and strays off the axis. Followed, the centre moves on with the frames before, until the zone
+// misses the image; frames clear of the border are left as found.
+TEST(FollowLight, CarriesTheCentreAcrossTheBorderOnTheLineOfTheFramesBefore) {
+  const cv::Size size(640, 427);
+  std::vector<LightImage> found;
+  std::vector<double> angles, true_x;
+  for (int i = 0; i <= 50; ++i) {
+    const double theta = 0.2 * i, x = 321 - 50 * theta;
+    angles.push_back(theta);
+    true_x.push_back(x);
+    LightImage l;
+    if (x - 35 > 2) {
+      l.found = true;
+      l.center = {x, 213.5};
+      l.core_radius_px = 35;
+      l.zone_radius_px = 90;
+    } else if (x > -35) {
+      l.found = true;
+      l.center = {std::max(x, 15.0), 213.5 + (i % 2 ? 25 : -20)};  // a spike's clipped piece
+      l.core_radius_px = 10;
+      l.zone_radius_px = 50;
+    }
+    found.push_back(l);
+  }
+  const std::vector<LightImage> lights = followLight(found, angles, size);
+  ASSERT_EQ(lights.size(), found.size());
+  int predicted = 0;
+  for (size_t i = 0; i < lights.size(); ++i) {
+    SCOPED_TRACE(angles[i]);
+    if (true_x[i] - 35 > 2) {
+      EXPECT_FALSE(lights[i].predicted);
+      EXPECT_EQ(lights[i].center, found[i].center);
+    } else if (true_x[i] > -90) {
+      ASSERT_TRUE(lights[i].predicted);
+      ++predicted;
+      EXPECT_NEAR(lights[i].center.x, true_x[i], 1e-6);
+      EXPECT_NEAR(lights[i].center.y, 213.5, 1e-6);
+      EXPECT_NEAR(lights[i].core_radius_px, 35, 1e-9);
+      EXPECT_NEAR(lights[i].zone_radius_px, 90, 1e-9);
+    } else {
+      EXPECT_FALSE(lights[i].predicted);  // its zone misses the image: as found (not at all)
+      EXPECT_FALSE(lights[i].found);
+    }
+  }
+  EXPECT_GE(predicted, 10);
+}
+
+// Beside a followed light, the pixels of its zone whose mirror point about it is outside the frame
+// are left out; those whose mirror is inside, those beyond the zone, and any beside a light that
+// was found stay.
+TEST(ValidBesideLight, LeavesOutTheZoneWhereTheMirrorIsOutsideTheFrame) {
+  const cv::Mat valid(200, 200, CV_8U, cv::Scalar(255));
+  LightImage light;
+  light.found = true;
+  light.center = {30, 100};
+  light.zone_radius_px = 50;
+  light.core_radius_px = 20;
+  EXPECT_EQ(cv::countNonZero(validBesideLight(valid, light)), 200 * 200);  // found, not predicted
+  light.predicted = true;
+  cv::Mat v = validBesideLight(valid, light);
+  EXPECT_EQ(v.at<uchar>(100, 40), 255);  // mirror at x = 19.5
+  EXPECT_EQ(v.at<uchar>(100, 70), 0);    // 40.5 px from the light, mirror at x = −10.5
+  EXPECT_EQ(v.at<uchar>(100, 85), 255);  // beyond the zone
+  light.center = {-10, 100};
+  v = validBesideLight(valid, light);
+  EXPECT_EQ(v.at<uchar>(100, 20), 0);
+  EXPECT_EQ(v.at<uchar>(100, 45), 255);  // 55.5 px away
+}
+
 }  // namespace
 }  // namespace flarekit::fit

@@ -952,14 +952,24 @@ class CaptureFitter {
     return g;
   }
 
-  // The light's image in a frame (found once per frame and kept for both sweeps).
+  // The light's image in a frame: found in every frame at the first call, followed where its core
+  // is cut by the frame's border (followLight), and kept for both sweeps.
   const LightImage& lightOf(int pos) {
-    auto it = lights_.find(pos);
-    if (it != lights_.end()) return it->second;
-    const Frame& f = frame(pos);
-    const cv::Mat lum = luminance(f.image);
-    return lights_[pos] = findLight(lum, f.valid, noiseOf(pos), options_.detection);
+    if (lights_.empty()) {
+      std::vector<LightImage> found;
+      std::vector<double> angles;
+      for (int p = 0; p < static_cast<int>(positions_.size()); ++p) {
+        found.push_back(findLight(luminance(frame(p).image), frame(p).valid, noiseOf(p), options_.detection));
+        angles.push_back(angle(p));
+      }
+      lights_ = followLight(std::move(found), angles, stack_.size);
+    }
+    return lights_[pos];
   }
+
+  // The pixels of a frame the ghosts are fitted to and detected in: its valid ones, but for where
+  // the light cannot be told from them (validBesideLight).
+  cv::Mat validOf(int pos) { return validBesideLight(frame(pos).valid, lightOf(pos)); }
 
   // Distance of a point (capture pixels) from the flare axis of a frame.
   double axisOffset(int pos, cv::Point2d p) { return flareAxisOffset(p, lightOf(pos), stack_.size); }
@@ -1012,7 +1022,7 @@ class CaptureFitter {
     // Backward, a frame no track is extended onto is refitted all the same: its forward fit came,
     // near a key frame, from a rough detection seed (skipping these refits cost the 12-frame CLI
     // hold-out test 62 → 16 dB).
-    const FramePyramid data(withoutLight(pos), f.valid, edge_, noiseOf(pos));
+    const FramePyramid data(withoutLight(pos), validOf(pos), edge_, noiseOf(pos));
     const double noise_sigma = data.full().noise_sigma;
     record.noise_sigma = noise_sigma;
     SolveStats stats = solveFrame(data, ghosts);
@@ -1361,9 +1371,8 @@ class CaptureFitter {
     for (auto& [pos, list] : by_frame) {
       std::vector<GhostParameters> all;
       for (const auto& [id, g] : list) all.push_back(g);
-      const Frame& f = frame(pos);
       // Against the frame without the light's image: the light is not a ghost the model failed.
-      FramePyramid pyramid(withoutLight(pos), f.valid, edge_, noiseOf(pos));
+      FramePyramid pyramid(withoutLight(pos), validOf(pos), edge_, noiseOf(pos));
       const int kd = detectionFactor();
       const FrameData& level = pyramid.level(kd);
       cv::Mat residual = residualAt(level, all);
@@ -1454,7 +1463,7 @@ class CaptureFitter {
   std::vector<int> positions_;
   std::vector<Track> tracks_;
   std::map<int, FrameFit> frame_fits_;
-  std::map<int, LightImage> lights_;  // by position in the fitted frame list
+  std::vector<LightImage> lights_;  // by position in the fitted frame list (lightOf)
   std::map<int, double> noise_;       // noise σ by position
   int next_id_ = 0;
   int detections_ = 0, rejected_ = 0;
