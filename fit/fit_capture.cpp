@@ -831,7 +831,14 @@ class CaptureFitter {
   // towards the light from them (a 14 px disc fitted with L = 2 px) and pulled their centres away.
   // A ghost that moves with the light is never clear of it and is not carried (data_synthetic
   // Heliar's brightest, of radius 27 px, 3–33 px from the light over 0.5–5°: its tracks end near
-  // the light still). nullopt when the ghost is not in the light's zone or has too few clear fits.
+  // the light still). A ghost larger than the light's zone is not carried either: S is kept only
+  // where it exceeds the level that bounds the zone (light_zone_sigma), so such a ghost keeps its
+  // parts beyond in the data and its fits beside the light stand, while a carried copy is frozen
+  // at its nearest clear fit, for a veil often degrees away where the light has left the frame
+  // (Heliar 640×427, λ × 1.01: a veil of R 213 px fitted at 12–14.8° was carried over 0–11.8°;
+  // Tessar, --holdout odd, λ × 1.02: a glare fit of h 0.9 px and inside brightness 1.1, 1000× the
+  // flare's, carried over 0–7.6°, PSNR −34 dB there). nullopt when the ghost is not in the light's
+  // zone, is larger than it, or has too few clear fits.
   std::optional<GhostParameters> carriedInto(const Track& t, int pos) {
     const LightImage& light = lightOf(pos);
     if (!light.found) return std::nullopt;
@@ -854,6 +861,7 @@ class CaptureFitter {
     }
     if (n < options_.tracking.min_track_frames || !(tt > 0)) return std::nullopt;
     GhostParameters g = *nearest;
+    if (std::max({g.left, g.right, g.height}) > light.zone_radius_px) return std::nullopt;
     const cv::Point2d centre = c0 + (angle(pos) / tt) * kt;
     g.center_x = centre.x;
     g.center_y = centre.y;

@@ -490,6 +490,51 @@ TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
   EXPECT_GT(carried, 0);
 }
 
+// A ghost larger than the light's zone keeps its parts beyond the zone in the data (S is kept only
+// where the light's image is brighter than at the zone's edge), and its fits beside the light
+// stand: it is fitted there, not carried, and keeps the size it has there. Carried, it kept the
+// size of its nearest fit clear of the light (26 px here, against 30 at θ = 0). The light leaves
+// the frame at 2°, as it does on the rig.
+TEST(FitCapture, FitsAGhostLargerThanTheLightsZoneNearTheAxis) {
+  FrameStack stack = testStack();
+  cv::theRNG().state = 7;
+  const cv::Point2d centre(80, 50);
+  for (int i = 0; i < 13; ++i) {
+    const double theta = 0.25 * i;
+    const cv::Point2d light = centre - cv::Point2d(40 * theta, 0);
+    model::GhostParameters g;  // shrinking by 4 px a degree
+    g.center_x = centre.x + 10 * theta;
+    g.center_y = centre.y;
+    g.left = g.right = 30 - 4 * theta;
+    g.height = 28 - 4 * theta;
+    g.border = {0.4, 0, 0};
+    g.inside = {0.1, 0, 0};
+    Frame f = ghostFrame(stack, i, theta, {g});
+    for (int y = 0; y < stack.size.height; ++y)
+      for (int x = 0; x < stack.size.width; ++x) {
+        const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
+        f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
+        if (r < 3) f.valid.at<uchar>(y, x) = 0;  // the clipped core
+      }
+    addNoise(f, 0.005);
+    stack.frames.push_back(f);
+  }
+  FitOptions options;
+  options.progress = false;
+  const FitResult r = fitCapture(stack, options);
+  int carried = 0;
+  for (const auto& t : r.tracks)
+    for (bool c : t.carried) carried += c;
+  EXPECT_EQ(carried, 0) << r.summary.BriefReport();
+  bool found = false;
+  for (const auto& at : r.model.ghostsAt(0)) {
+    const auto& g = at.parameters;
+    found = found || (std::hypot(g.center_x - centre.x, g.center_y - centre.y) < 3 &&
+                      std::abs(g.left - 30) < 2 && std::abs(g.right - 30) < 2);
+  }
+  EXPECT_TRUE(found) << r.summary.BriefReport();
+}
+
 // A ghost that one frame does not show (there its fit sinks into the noise, as a faint veil's
 // fit breaks down for a frame) ends one track and starts another: the two are one ghost, and the
 // model has one, across that frame.
