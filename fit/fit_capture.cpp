@@ -836,9 +836,9 @@ class CaptureFitter {
   // parts beyond in the data and its fits beside the light stand, while a carried copy is frozen
   // at its nearest clear fit, for a veil often degrees away where the light has left the frame
   // (Heliar 640×427, λ × 1.01: a veil of R 213 px fitted at 12–14.8° was carried over 0–11.8°;
-  // Tessar, --holdout odd, λ × 1.02: a glare fit of h 0.9 px and inside brightness 1.1, 1000× the
-  // flare's, carried over 0–7.6°, PSNR −34 dB there). nullopt when the ghost is not in the light's
-  // zone, is larger than it, or has too few clear fits.
+  // Tessar, --holdout odd, λ × 1.02: a glare fit of h 0.9 px and inside brightness 1.1, where
+  // the other ghosts' are below 1e-3, carried over 0–7.6°, PSNR −34 dB there). nullopt when the
+  // ghost is not in the light's zone, is larger than it, or has too few clear fits.
   std::optional<GhostParameters> carriedInto(const Track& t, int pos) {
     const LightImage& light = lightOf(pos);
     if (!light.found) return std::nullopt;
