@@ -444,6 +444,25 @@ TEST(FitCapture, HoldsASharpGhostApartFromTheGlowUnderIt) {
   EXPECT_EQ(glare, 1) << r.summary.BriefReport();
 }
 
+// A point light's image added at `light`: a halo 20 / (1 + (r/3)²)^1.5 and a clipped core of
+// 3 px radius (left out of the valid mask).
+void addLight(Frame& f, cv::Point2d light) {
+  for (int y = 0; y < f.image.rows; ++y)
+    for (int x = 0; x < f.image.cols; ++x) {
+      const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
+      f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
+      if (r < 3) f.valid.at<uchar>(y, x) = 0;
+    }
+}
+
+// Frames in which a fit's ghosts were carried through the light rather than fitted.
+int carriedFrames(const FitResult& r) {
+  int carried = 0;
+  for (const auto& t : r.tracks)
+    for (bool c : t.carried) carried += c;
+  return carried;
+}
+
 // Near θ = 0 a ghost is concentric with the light, and the light's point-symmetric estimate S
 // takes it with the halo: its fit sinks into the noise. The fitter carries it from the frames
 // where it stands clear of the light into the light, towards the image centre, as bright as it
@@ -464,12 +483,7 @@ TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
     g.border = {0.8, 0, 0};
     g.inside = {0.3, 0, 0};
     Frame f = ghostFrame(stack, i, theta, {g});
-    for (int y = 0; y < stack.size.height; ++y)
-      for (int x = 0; x < stack.size.width; ++x) {
-        const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
-        f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
-        if (r < 3) f.valid.at<uchar>(y, x) = 0;  // the clipped core
-      }
+    addLight(f, light);
     addNoise(f, 0.005);
     stack.frames.push_back(f);
   }
@@ -484,9 +498,7 @@ TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
                       std::abs(g.left - 14) < 3 && std::abs(g.right - 14) < 3 && std::abs(g.border[0] - 0.8) < 0.2);
   }
   EXPECT_TRUE(found) << r.summary.BriefReport();
-  int carried = 0;
-  for (const auto& t : r.tracks)
-    for (bool c : t.carried) carried += c;
+  const int carried = carriedFrames(r);
   EXPECT_GT(carried, 0);
 }
 
@@ -510,21 +522,14 @@ TEST(FitCapture, FitsAGhostLargerThanTheLightsZoneNearTheAxis) {
     g.border = {0.4, 0, 0};
     g.inside = {0.1, 0, 0};
     Frame f = ghostFrame(stack, i, theta, {g});
-    for (int y = 0; y < stack.size.height; ++y)
-      for (int x = 0; x < stack.size.width; ++x) {
-        const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
-        f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
-        if (r < 3) f.valid.at<uchar>(y, x) = 0;  // the clipped core
-      }
+    addLight(f, light);
     addNoise(f, 0.005);
     stack.frames.push_back(f);
   }
   FitOptions options;
   options.progress = false;
   const FitResult r = fitCapture(stack, options);
-  int carried = 0;
-  for (const auto& t : r.tracks)
-    for (bool c : t.carried) carried += c;
+  const int carried = carriedFrames(r);
   EXPECT_EQ(carried, 0) << r.summary.BriefReport();
   bool found = false;
   for (const auto& at : r.model.ghostsAt(0)) {
