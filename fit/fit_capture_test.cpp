@@ -2,6 +2,8 @@
 // tracks, and a whole synthetic stack fitted end to end in memory.
 #include "fit/fit_capture.h"
 
+#include <functional>
+
 #include <gtest/gtest.h>
 
 #include "model/model_renderer.h"
@@ -444,17 +446,6 @@ TEST(FitCapture, HoldsASharpGhostApartFromTheGlowUnderIt) {
   EXPECT_EQ(glare, 1) << r.summary.BriefReport();
 }
 
-// A point light's image added at `light`: a halo 20 / (1 + (r/3)²)^1.5 and a clipped core of
-// 3 px radius (left out of the valid mask).
-void addLight(Frame& f, cv::Point2d light) {
-  for (int y = 0; y < f.image.rows; ++y)
-    for (int x = 0; x < f.image.cols; ++x) {
-      const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
-      f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
-      if (r < 3) f.valid.at<uchar>(y, x) = 0;
-    }
-}
-
 // Frames in which a fit's ghosts were carried through the light rather than fitted.
 int carriedFrames(const FitResult& r) {
   int carried = 0;
@@ -463,43 +454,60 @@ int carriedFrames(const FitResult& r) {
   return carried;
 }
 
-// Near θ = 0 a ghost is concentric with the light, and the light's point-symmetric estimate S
-// takes it with the halo: its fit sinks into the noise. The fitter carries it from the frames
-// where it stands clear of the light into the light, towards the image centre, as bright as it
-// was, and the report marks those frames as carried.
-TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
+// The image centre of testStack's frames, where every ghost is at θ = 0.
+const cv::Point2d kAxisCentre(80, 50);
+
+// The fit of 13 frames 0.25° apart (0–3°), each showing ghost(θ) and a point light that starts at
+// the image centre and moves to −x by `light_px_per_deg`: a halo 20 / (1 + (r/3)²)^1.5 and a
+// clipped core of 3 px radius (left out of the valid mask); noise σ 0.005.
+FitResult fitBesideAMovingLight(double light_px_per_deg,
+                                const std::function<model::GhostParameters(double)>& ghost) {
   FrameStack stack = testStack();
   cv::theRNG().state = 7;
-  const cv::Point2d centre(80, 50);
   for (int i = 0; i < 13; ++i) {
     const double theta = 0.25 * i;
-    // The light moves to −x, the ghost to +x: 30 px apart per degree.
-    const cv::Point2d light = centre - cv::Point2d(20 * theta, 0);
-    model::GhostParameters g;
-    g.center_x = centre.x + 10 * theta;
-    g.center_y = centre.y;
-    g.left = g.right = 14;
-    g.height = 13;
-    g.border = {0.8, 0, 0};
-    g.inside = {0.3, 0, 0};
-    Frame f = ghostFrame(stack, i, theta, {g});
-    addLight(f, light);
+    const cv::Point2d light = kAxisCentre - cv::Point2d(light_px_per_deg * theta, 0);
+    Frame f = ghostFrame(stack, i, theta, {ghost(theta)});
+    for (int y = 0; y < f.image.rows; ++y)
+      for (int x = 0; x < f.image.cols; ++x) {
+        const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
+        f.image.at<float>(y, x) += static_cast<float>(20 / std::pow(1 + (r / 3) * (r / 3), 1.5));
+        if (r < 3) f.valid.at<uchar>(y, x) = 0;
+      }
     addNoise(f, 0.005);
     stack.frames.push_back(f);
   }
   FitOptions options;
   options.progress = false;
-  const FitResult r = fitCapture(stack, options);
+  return fitCapture(stack, options);
+}
+
+// Near θ = 0 a ghost is concentric with the light, and the light's point-symmetric estimate S
+// takes it with the halo: its fit sinks into the noise. The fitter carries it from the frames
+// where it stands clear of the light into the light, towards the image centre, as bright as it
+// was, and the report marks those frames as carried.
+TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
+  // The light moves to −x, the ghost to +x: 30 px apart per degree.
+  const FitResult r = fitBesideAMovingLight(20, [](double theta) {
+    model::GhostParameters g;
+    g.center_x = kAxisCentre.x + 10 * theta;
+    g.center_y = kAxisCentre.y;
+    g.left = g.right = 14;
+    g.height = 13;
+    g.border = {0.8, 0, 0};
+    g.inside = {0.3, 0, 0};
+    return g;
+  });
   // At θ = 0: a ghost at the image centre, of about the true size and brightness.
   bool found = false;
   for (const auto& at : r.model.ghostsAt(0)) {
     const auto& g = at.parameters;
-    found = found || (std::hypot(g.center_x - centre.x, g.center_y - centre.y) < 3 &&
-                      std::abs(g.left - 14) < 3 && std::abs(g.right - 14) < 3 && std::abs(g.border[0] - 0.8) < 0.2);
+    found = found || (std::hypot(g.center_x - kAxisCentre.x, g.center_y - kAxisCentre.y) < 3 &&
+                      std::abs(g.left - 14) < 3 && std::abs(g.right - 14) < 3 &&
+                      std::abs(g.border[0] - 0.8) < 0.2);
   }
   EXPECT_TRUE(found) << r.summary.BriefReport();
-  const int carried = carriedFrames(r);
-  EXPECT_GT(carried, 0);
+  EXPECT_GT(carriedFrames(r), 0);
 }
 
 // A ghost larger than the light's zone keeps its parts beyond the zone in the data (S is kept only
@@ -508,33 +516,21 @@ TEST(FitCapture, CarriesAGhostIntoTheLightNearTheAxis) {
 // size of its nearest fit clear of the light (26 px here, against 30 at θ = 0). The light leaves
 // the frame at 2°, as it does on the rig.
 TEST(FitCapture, FitsAGhostLargerThanTheLightsZoneNearTheAxis) {
-  FrameStack stack = testStack();
-  cv::theRNG().state = 7;
-  const cv::Point2d centre(80, 50);
-  for (int i = 0; i < 13; ++i) {
-    const double theta = 0.25 * i;
-    const cv::Point2d light = centre - cv::Point2d(40 * theta, 0);
+  const FitResult r = fitBesideAMovingLight(40, [](double theta) {
     model::GhostParameters g;  // shrinking by 4 px a degree
-    g.center_x = centre.x + 10 * theta;
-    g.center_y = centre.y;
+    g.center_x = kAxisCentre.x + 10 * theta;
+    g.center_y = kAxisCentre.y;
     g.left = g.right = 30 - 4 * theta;
     g.height = 28 - 4 * theta;
     g.border = {0.4, 0, 0};
     g.inside = {0.1, 0, 0};
-    Frame f = ghostFrame(stack, i, theta, {g});
-    addLight(f, light);
-    addNoise(f, 0.005);
-    stack.frames.push_back(f);
-  }
-  FitOptions options;
-  options.progress = false;
-  const FitResult r = fitCapture(stack, options);
-  const int carried = carriedFrames(r);
-  EXPECT_EQ(carried, 0) << r.summary.BriefReport();
+    return g;
+  });
+  EXPECT_EQ(carriedFrames(r), 0) << r.summary.BriefReport();
   bool found = false;
   for (const auto& at : r.model.ghostsAt(0)) {
     const auto& g = at.parameters;
-    found = found || (std::hypot(g.center_x - centre.x, g.center_y - centre.y) < 3 &&
+    found = found || (std::hypot(g.center_x - kAxisCentre.x, g.center_y - kAxisCentre.y) < 3 &&
                       std::abs(g.left - 30) < 2 && std::abs(g.right - 30) < 2);
   }
   EXPECT_TRUE(found) << r.summary.BriefReport();
