@@ -627,11 +627,60 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks, cons
   return m;
 }
 
+namespace {
+
+// Where a track turns from glare into a sharp ghost or back (isGlare) and stays so: the first fit
+// i whose min_frames fits before it are all of one kind and min_frames from it on all of the
+// other; 0 when there is none. Such a track is two things (a tracked veil joined to the glare
+// that took over its frames, or a glare fitted as a sharp veil for a while), and no polynomial
+// through both describes either, while their outlines, both wider than the frame, overlap as one
+// ghost's. Heliar 640×427, λ × 1: ghost 40 was a sharp veil at 9.2–11.6° (Fo at its 77 px bound)
+// and glare at 11.8–14.8° (Fo 479–758 px); its model scored 12–22 dB there, against 29.1–31.0 for
+// the frames' fits, and 29.4–30.1 dB split.
+int glareChange(const GhostTrackFit& t, cv::Size image_size, int min_frames) {
+  const int n = static_cast<int>(t.fits.size());
+  std::vector<bool> glare(n);
+  for (int i = 0; i < n; ++i) glare[i] = isGlare(t.fits[i], image_size);
+  for (int i = min_frames; i <= n - min_frames; ++i) {
+    bool persists = glare[i - 1] != glare[i];
+    for (int j = i - min_frames; j < i + min_frames && persists; ++j)
+      persists = glare[j] == (j < i ? glare[i - 1] : glare[i]);
+    if (persists) return i;
+  }
+  return 0;
+}
+
+// Where to cut a track whose polynomials cannot follow it: where consecutive fits differ most
+// (where it jumped from one ghost to another); 0 when they follow it.
+int polynomialsLoseTrack(const GhostTrackFit& t, const model::CaptureInfo& info, int channels,
+                         int degree, int min_frames) {
+  constexpr double kSameGhostIoU = 0.5;
+  const int n = static_cast<int>(t.fits.size());
+  const model::FlareModel m = buildFlareModel({t}, info, channels, degree);
+  bool follows = true;
+  for (int i = 0; i < n && follows; ++i) {
+    const auto at = m.ghostsAt(t.angles_deg[i]);
+    follows = !at.empty() && outlineIoU(at[0].parameters, t.fits[i]) >= kSameGhostIoU;
+  }
+  if (follows) return 0;
+  int split = min_frames;
+  double worst = 2;
+  for (int i = min_frames; i <= n - min_frames; ++i) {
+    const double v = outlineIoU(t.fits[i - 1], t.fits[i]);
+    if (v < worst) {
+      worst = v;
+      split = i;
+    }
+  }
+  return split;
+}
+
+}  // namespace
+
 std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostTrackFit> tracks,
                                                               const model::CaptureInfo& info,
                                                               int channels, int degree,
                                                               int min_frames, int first_new_id) {
-  constexpr double kSameGhostIoU = 0.5;
   std::vector<GhostTrackFit> done;
   int next_id = first_new_id;
   while (!tracks.empty()) {
@@ -642,25 +691,12 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
       done.push_back(std::move(t));
       continue;
     }
-    const model::FlareModel m = buildFlareModel({t}, info, channels, degree);
-    bool follows = true;
-    for (int i = 0; i < n && follows; ++i) {
-      const auto at = m.ghostsAt(t.angles_deg[i]);
-      follows = !at.empty() && outlineIoU(at[0].parameters, t.fits[i]) >= kSameGhostIoU;
-    }
-    if (follows) {
+    int split = glareChange(t, info.image_size, min_frames);
+    const bool kind_changes = split > 0;
+    if (!kind_changes) split = polynomialsLoseTrack(t, info, channels, degree, min_frames);
+    if (split == 0) {
       done.push_back(std::move(t));
       continue;
-    }
-    // Split where consecutive fits differ most (where the track jumped from one ghost to another).
-    int split = min_frames;
-    double worst = 2;
-    for (int i = min_frames; i <= n - min_frames; ++i) {
-      const double v = outlineIoU(t.fits[i - 1], t.fits[i]);
-      if (v < worst) {
-        worst = v;
-        split = i;
-      }
     }
     auto piece = [&](int from, int to) {
       GhostTrackFit p;
@@ -679,10 +715,11 @@ std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostT
     };
     GhostTrackFit low = piece(0, split), high = piece(split, n);
     static const std::string kSplit = "split: its polynomials could not follow the track";
+    static const std::string kSplitKind = "split: glare on one side, a sharp outline on the other";
     low.id = t.id;
-    low.end_high = kSplit;
+    low.end_high = kind_changes ? kSplitKind : kSplit;
     high.id = next_id++;
-    high.end_low = kSplit;
+    high.end_low = low.end_high;
     high.key_frame = -1;  // the caller knows the frame positions
     tracks.push_back(std::move(high));
     tracks.push_back(std::move(low));

@@ -190,13 +190,15 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   double range_margin_deg = 0, double capture_min_deg = -90,
                                   double capture_max_deg = 90, bool refine_in_image = false);
 
-// Tracks whose polynomials cannot follow their fits, split until they can: a track whose model
-// ghost (degree as in buildFlareModel) at one of its fitted angles is not the same ghost as the
-// fit there (outline boxes overlapping by IoU < 0.5) is cut where consecutive fits differ most,
-// each piece keeping ≥ min_frames frames; tracks shorter than 2 × min_frames are kept whole. The
-// later piece gets a new id (from first_new_id on) and key_frame −1 (the caller sets it). A track
-// that jumped from one ghost onto another (a Heliar ghost beside the light at 5° and a flat wide
-// ellipse at 12.6° in one track) otherwise became one polynomial describing neither.
+// Tracks whose polynomials cannot follow their fits, split until they can: a track that turns
+// from glare into a sharp ghost or back (fit/cost.h isGlare) for at least min_frames fits on either
+// side is cut there; a track whose model ghost (degree as in buildFlareModel) at one of its fitted
+// angles is not the same ghost as the fit there (outline boxes overlapping by IoU < 0.5) is cut
+// where consecutive fits differ most. Each piece keeps ≥ min_frames frames; tracks shorter than
+// 2 × min_frames are kept whole. The later piece gets a new id (from first_new_id on) and
+// key_frame −1 (the caller sets it). A track that jumped from one ghost onto another (a Heliar
+// ghost beside the light at 5° and a flat wide ellipse at 12.6° in one track) otherwise became one
+// polynomial describing neither.
 std::vector<GhostTrackFit> splitTracksPolynomialsCannotFollow(std::vector<GhostTrackFit> tracks,
                                                               const model::CaptureInfo& info,
                                                               int channels, int degree,

@@ -245,6 +245,39 @@ TEST(SplitTracks, ATrackThatJumpsToAnotherGhostBecomesTwo) {
   EXPECT_EQ(splitTracksPolynomialsCannotFollow({smooth}, info, 1, 2, 3, 10).size(), 1u);
 }
 
+TEST(SplitTracks, ATrackThatTurnsFromASharpVeilIntoGlareBecomesTwo) {
+  // One outline wider than the frame over 12 frames: a sharp veil (Fo 5 px) for six, glare (Fo
+  // 150 px, isGlare on the 233 px diagonal) for six. The outlines are the same ghost's, so only
+  // the change of kind tells the two apart.
+  const model::CaptureInfo info = testCapture();
+  auto veil = [](double fo) {
+    model::GhostParameters g;
+    g.center_x = 100;
+    g.center_y = 60;
+    g.left = g.right = 150;
+    g.height = 100;
+    g.border = {1e-3, 0, 0};
+    g.inside = {2e-3, 0, 0};
+    g.outside_falloff = fo;
+    return g;
+  };
+  ASSERT_FALSE(isGlare(veil(5), info.image_size));
+  ASSERT_TRUE(isGlare(veil(150), info.image_size));
+  GhostTrackFit t;
+  t.id = 4;
+  for (int i = 0; i < 12; ++i) addFrame(t, 0.5 * i, veil(i < 6 ? 5 : 150));
+  const auto split = splitTracksPolynomialsCannotFollow({t}, info, 1, 2, 3, 10);
+  ASSERT_EQ(split.size(), 2u);
+  EXPECT_EQ(split[0].angles_deg.back(), 2.5);
+  EXPECT_EQ(split[1].angles_deg.front(), 3.0);
+  EXPECT_EQ(split[0].end_high, "split: glare on one side, a sharp outline on the other");
+  EXPECT_EQ(split[1].end_low, split[0].end_high);
+  // Glare whose fall-off dips for two frames (fewer than min_frames) stays one track.
+  GhostTrackFit flicker = t;
+  for (int i = 0; i < 12; ++i) flicker.fits[i] = veil(i == 5 || i == 6 ? 5 : 150);
+  EXPECT_EQ(splitTracksPolynomialsCannotFollow({flicker}, info, 1, 2, 3, 10).size(), 1u);
+}
+
 // A sharp ghost ends where its fit runs to a size bound or out of the image. Glare, the glow
 // of the veils too faint to see, does not: its outline may be wider than the frame, one side at
 // 0.5 px, or its centre outside the image with its fall-off reaching in; it ends only where that
