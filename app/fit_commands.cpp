@@ -69,7 +69,7 @@ void registerFit(CLI::App& app) {
   struct Options {
     StackArgs stack;
     std::string out, optimizer = "ceres", degree = "2", holdout, report;
-    int threads = 2;
+    int threads = 2, joint_sweeps = -1;
     double edge_weight = -1, shape_prior = -1;
     bool light_symmetry = true, veils = false, glare = true, pixel_noise = true;
   };
@@ -88,6 +88,10 @@ void registerFit(CLI::App& app) {
   cmd->add_option("--edge-weight", o->edge_weight, "λ, the edge term's weight (default 1)");
   cmd->add_option("--shape-prior", o->shape_prior,
                   "σ of the prior that holds unseen parts of a ghost's outline at its seed, as a fraction of its size (default 1; 0 = off)");
+  cmd->add_option(
+      "--joint-sweeps", o->joint_sweeps,
+      "Sweeps that refine all ghosts' polynomials together towards each frame's fits (default 2; "
+      "0 = each ghost towards its own fits only, faster)");
   cmd->add_flag("--light-symmetry,!--no-light-symmetry", o->light_symmetry,
                 "Separate the light's own image by its point symmetry (default), or keep out of the light's zone");
   cmd->add_flag("--veils", o->veils,
@@ -120,6 +124,7 @@ void registerFit(CLI::App& app) {
     options.threads = o->threads;
     if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
     if (o->shape_prior >= 0) options.cost.prior_fraction = o->shape_prior;
+    if (o->joint_sweeps >= 0) options.joint_refine_sweeps = o->joint_sweeps;
     options.detection.light_symmetry = o->light_symmetry;
     options.detection.find_veils = o->veils;
     options.detection.find_glare = o->glare;

@@ -77,6 +77,17 @@ struct FitOptions {
   //   Brendel Tessar:  53.6 → 55.6 %, 76.6 → 78.1 %, 21.6 → 23.2 dB, 15.8 → 13.1 px;
   // about 11 s more for the Heliar capture.
   bool refine_in_image = true;
+  // Then refine the ghosts' polynomials together, in this many sweeps, towards the sum of the fits
+  // in each frame rather than each ghost towards its own (buildFlareModel's joint_sweeps; ≥ 0;
+  // needs refine_in_image). On the 640×427 captures (0–30° at 0.2°), means over λ × 0.98, 0.99, 1,
+  // 1.01, 1.02 of the model's recall / precision / median PSNR / median centroid error, 0 → 2:
+  //   Heliar Tronnier: 71.8 → 73.1 %, 80.9 → 81.6 %, 24.5 → 25.8 dB, 7.8 → 7.7 px;
+  //   Brendel Tessar:  75.1 → 75.0 %, 68.7 → 69.3 %, 24.0 → 25.5 dB, 10.7 → 10.6 px;
+  // every one of the ten fits gains 0.5–2.0 dB, most from 9° on, where frame-wide veils overlap
+  // (median PSNR there 21.4 → 23.6 and 22.2 → 23.9 dB; the frames' own fits: 25.8 and 26.1 dB).
+  // One sweep with the whole shortfall instead (λ × 1 only): 25.0 and 25.2 dB against 25.6 and
+  // 25.7. It costs time: the model step of λ × 1 took 11 → 30 s (Heliar), 9 → 13 s (Tessar).
+  int joint_refine_sweeps = 2;
   // Count the fitter's thresholds (detection levels, a track's end, the glare's seed, the light's
   // zone, the cost's scale floor) in σ of the frame's pixel noise (estimatePixelNoiseSigma: the σ
   // by which fit-eval calls a ghost visible) instead of the background's spread
@@ -184,11 +195,14 @@ std::vector<bool> polynomialInliers(const std::vector<double>& angles_deg,
 // and the fitter passes half the spacing of its frames, so that the model has no gaps between
 // tracks that follow each other and covers the frames --holdout odd left out next to a track.
 // With `refine_in_image`, every ghost's polynomials are then refined together in image space, so
-// that its rendered image comes closest to its fits', each frame weighed by its brightest fit.
+// that its rendered image comes closest to its fits', each frame weighed by its brightest fit;
+// and then, in `joint_sweeps` sweeps over all ghosts, so that the model's image comes closest to
+// the sum of the fits in each fitted frame.
 model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   const model::CaptureInfo& info, int channels, int degree,
                                   double range_margin_deg = 0, double capture_min_deg = -90,
-                                  double capture_max_deg = 90, bool refine_in_image = false);
+                                  double capture_max_deg = 90, bool refine_in_image = false,
+                                  int joint_sweeps = 0);
 
 // Tracks whose polynomials cannot follow their fits, split until they can: a track that turns
 // from glare into a sharp ghost or back (fit/cost.h isGlare) for at least min_frames fits on either
