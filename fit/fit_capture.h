@@ -22,7 +22,8 @@
 //     sinks into the noise. Identities are kept where ghosts cross because each ghost keeps its
 //     own parameter block seeded from its own extrapolation.
 //  4. Polynomials per ghost and parameter over its tracked range (degree 2 by default, or chosen
-//     1–4 by held-out error).
+//     1–4 by held-out error), refined in image space: each ghost towards its own fits, then all
+//     together towards the sum of the fits in each frame (buildFlareModel).
 
 #include <functional>
 #include <string>
