@@ -84,7 +84,7 @@ struct FitOptions {
   // 1.01, 1.02 of the model's recall / precision / median PSNR / median centroid error, 0 → 2:
   //   Heliar Tronnier: 71.8 → 73.1 %, 80.9 → 81.6 %, 24.5 → 25.8 dB, 7.8 → 7.7 px;
   //   Brendel Tessar:  75.1 → 75.0 %, 68.7 → 69.3 %, 24.0 → 25.5 dB, 10.7 → 10.6 px;
-  // every one of the ten fits gains 0.5–2.0 dB, most from 9° on, where frame-wide veils overlap
+  // every one of the ten fits gains 0.5–2.2 dB, most from 9° on, where frame-wide veils overlap
   // (median PSNR there 21.4 → 23.6 and 22.2 → 23.9 dB; the frames' own fits: 25.8 and 26.1 dB).
   // One sweep with the whole shortfall instead (λ × 1 only): 25.0 and 25.2 dB against 25.6 and
   // 25.7. It costs time: the model step of λ × 1 took 11 → 30 s (Heliar), 9 → 13 s (Tessar).
