@@ -678,7 +678,7 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
     fitIntensitiesInImage(t, image_inliers, info.image_size, channels, intensity_degree, g);
     if (refine_in_image) refineTrackInImage(t, refine_level, channels, fit_images[track_index], frame_peaks, g);
   });
-  if (refine_in_image)
+  if (refine_in_image && joint_sweeps > 0)
     refineTracksTogether(tracks, fit_images, frame_peaks, refine_level, channels, joint_sweeps,
                          m.ghosts);
   return m;
