@@ -87,8 +87,9 @@ struct FitOptions {
   // every one of the ten fits gains 0.5–2.2 dB, most from 9° on, where frame-wide veils overlap
   // (median PSNR there 21.4 → 23.6 and 22.2 → 23.9 dB; the frames' own fits: 25.8 and 26.1 dB).
   // One sweep with the whole shortfall instead (λ × 1 only): 25.0 and 25.2 dB against 25.6 and
-  // 25.7. It costs time: the model step of λ × 1 took 9.9 → 17.5 s (Heliar) and 11.0 → 15.0 s
-  // (Tessar).
+  // 25.7; three sweeps: 26.1 and 26.1 dB, but held out (--holdout odd) 24.7 and 22.7 against
+  // 24.6 and 23.0. It costs time: the model step of λ × 1 took 9.9 → 17.5 s (Heliar) and
+  // 11.0 → 15.0 s (Tessar).
   int joint_refine_sweeps = 2;
   // Count the fitter's thresholds (detection levels, a track's end, the glare's seed, the light's
   // zone, the cost's scale floor) in σ of the frame's pixel noise (estimatePixelNoiseSigma: the σ
