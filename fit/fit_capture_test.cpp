@@ -218,7 +218,7 @@ TEST(BuildFlareModel, RefinedInImageTheModelDrawsWhatTheFitsDraw) {
 
 TEST(BuildFlareModel, RefinedTogetherTheGhostsDrawTheSumOfTheirFits) {
   // A small bright disc inside a broad faint one, fitted in every other frame the other way: the
-  // broad ghost takes most of the small one's light as a bright core (a steep ramp, Fi 40 px,
+  // broad ghost takes most of the small one's light as a bright core (a steep ramp, Fi 50 px,
   // exponent 6) and the small one is left dim, as the fits of overlapping Heliar veils trade
   // light from frame to frame. No polynomial follows either ghost's fits, and each ghost refined
   // on its own ends between its two kinds of fit; the sum of the fits, though, barely changes,
