@@ -7,9 +7,11 @@
 
 #include <ceres/ceres.h>
 #include <ceres/gradient_checker.h>
-#include <opencv2/imgproc.hpp>
+#include <glog/logging.h>
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 
+#include "common/log.h"
 #include "fit/group_solver.h"
 #include "fit/testing.h"
 #include "model/model_renderer.h"
@@ -286,6 +288,29 @@ TEST(SolveGroup, ShapePriorHoldsWhatTheFrameDoesNotShow) {
   EXPECT_NEAR(g.center_x - g.left, 64, 0.2);
   EXPECT_NEAR(g.height, 18, 0.2);
   EXPECT_NEAR(g.center_x + g.right, seeds[0].center_x + seeds[0].right, 0.25 * 30);
+}
+
+// Ceres's warnings (e.g. its Levenberg–Marquardt's failed Cholesky steps, which it recovers from)
+// go to FlareKit's log at debug level, so --quiet and the default level print none of them.
+TEST(SolveGroup, CeresWarningsGoToTheLogAtDebugLevel) {
+  routeSolverLogging();
+  const LogLevel level = logLevel();
+  setLogLevel(LogLevel::kInfo);
+  ::testing::internal::CaptureStderr();
+  LOG(WARNING) << "a Ceres warning";
+  const std::string at_info = ::testing::internal::GetCapturedStderr();
+  setLogLevel(LogLevel::kDebug);
+  ::testing::internal::CaptureStderr();
+  LOG(WARNING) << "a Ceres warning";
+  LOG(ERROR) << "a Ceres error";
+  const std::string at_debug = ::testing::internal::GetCapturedStderr();
+  setLogLevel(level);
+  EXPECT_EQ(at_info, "");
+  EXPECT_NE(at_debug.find("debug: Ceres (cost_test.cpp:"), std::string::npos) << at_debug;
+  EXPECT_NE(at_debug.find("a Ceres warning"), std::string::npos) << at_debug;
+  EXPECT_NE(at_debug.find("flarekit: warning: Ceres (cost_test.cpp:"), std::string::npos)
+      << at_debug;
+  EXPECT_EQ(at_debug.find("Logging before InitGoogleLogging"), std::string::npos) << at_debug;
 }
 
 }  // namespace

@@ -4,10 +4,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <mutex>
 
 #include <ceres/ceres.h>
+#include <glog/logging.h>
 
 #include "common/error.h"
+#include "common/log.h"
 #include "fit/normal_equations.h"
 
 namespace flarekit::fit {
@@ -195,6 +198,7 @@ class RelativeReductionTolerance : public ceres::IterationCallback {
 
 GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameters> seeds,
                           const SolverOptions& options) {
+  routeSolverLogging();
   const auto t0 = Clock::now();
   const long long evaluations0 = cost.evaluations();
   GroupFitResult result;
@@ -400,7 +404,38 @@ class WholeGroupCost : public ceres::CostFunction {
   GroupCost& cost_;
 };
 
+// Ceres's glog messages, to common/log (see routeSolverLogging).
+class GlogToLog : public google::LogSink {
+ public:
+  void send(google::LogSeverity severity, const char* /*full_filename*/, const char* base_filename,
+            int line, const google::LogMessageTime& /*time*/, const char* message,
+            size_t message_len) override {
+    const std::string text = std::string("Ceres (") + base_filename + ":" + std::to_string(line) +
+                             "): " + std::string(message, message_len);
+    if (severity >= google::GLOG_ERROR)
+      logWarning(text);
+    else
+      logDebug(text);
+  }
+};
 }  // namespace
+
+void routeSolverLogging() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    if (google::IsGoogleLoggingInitialized()) return;
+    google::InitGoogleLogging("flarekit");
+    // No log files (glog writes them to /tmp once initialised), nothing on stderr short of a
+    // fatal error (which aborts): the sink has every message.
+    for (google::LogSeverity s = google::GLOG_INFO; s <= google::GLOG_FATAL; ++s)
+      google::SetLogDestination(s, "");
+    FLAGS_logtostderr = false;
+    FLAGS_alsologtostderr = false;
+    google::SetStderrLogging(google::GLOG_FATAL);
+    static GlogToLog sink;
+    google::AddLogSink(&sink);
+  });
+}
 
 std::unique_ptr<ceres::CostFunction> makeGroupCostFunction(GroupCost& cost) {
   return std::make_unique<WholeGroupCost>(cost);
