@@ -93,8 +93,9 @@ GroupFitResult solveGroup(GroupCost& cost, std::span<const model::GhostParameter
 // Sends the messages Ceres logs (through glog) to FlareKit's log (common/log.h): glog's warnings
 // and below at debug level, its errors as warnings. Without it glog writes every message to stderr
 // past --quiet, such as Levenberg–Marquardt's "Linear solver failure ... dense Cholesky
-// factorization", after which Ceres raises its damping and goes on. solveGroup calls it; calling it
-// again does nothing. A program that initialised glog itself keeps its own setup.
+// factorization", after which Ceres raises its damping and goes on. solveGroup calls it before each
+// Ceres solve; calling it again does nothing. A program that initialised glog itself keeps its own
+// setup.
 void routeSolverLogging();
 
 // The whole group cost as one ceres::CostFunction of the ghosts' parameter blocks (one block per
