@@ -98,8 +98,9 @@ void registerFit(CLI::App& app) {
                 "Also seed veils that fill the frame from steps of the residual along the flare axis "
                 "(off by default: more ghosts found, a less stable physics ranking; fit/detection.h)");
   cmd->add_flag("--glare,!--no-glare", o->glare,
-                "Seed veiling glare, the smooth glow many faint veils sum to, as a ghost of its own with a "
-                "long fall-off (default), so the ghosts keep sharp outlines (fit/cost.h isGlare)");
+                "Seed veiling glare, the pedestal many faint veils wider than the frame sum to, as "
+                "a ghost of its own flat over the frame (default), so the ghosts keep sharp "
+                "outlines (fit/cost.h isGlare)");
   cmd->add_flag(
       "--pixel-noise,!--no-pixel-noise", o->pixel_noise,
       "Count thresholds in σ of the frame's pixel noise (default), or in the background's spread "

@@ -165,6 +165,18 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   else if (index >= layout.ib(0) && index < layout.fi()) clamp(0, intensity_limit);
   else if (index == layout.fi()) clamp(0.3, diag);
   else if (index == layout.fo()) clamp(0.3, glare ? diag : kSharpOutsideFalloffFraction * diag);
+  if (glare) {
+    // The pedestal (isGlare): with the centre in the frame and half-sizes of at least 2 (W + H),
+    // every pixel of the frame lies at least (W + H) / √2 inside the outline, whatever Cl and Cr
+    // (a diamond of those half-sizes is the smallest such outline), beyond an inside fall-off of
+    // at most (W + H) / 2: the glare is Ii over the whole frame. Fo stays above isGlare's limit.
+    const double span = size.width + size.height;
+    if (index == kMx) b = {0.0, static_cast<double>(size.width)};
+    else if (index == kMy) b = {0.0, static_cast<double>(size.height)};
+    else if (index == kL || index == kR || index == kH) b = {2 * span, 4 * span};
+    else if (index == layout.fi()) b = {0.3, 0.5 * span};
+    else if (index == layout.fo()) b = {4 * kSharpOutsideFalloffFraction * diag, diag};
+  }
   return b;
 }
 

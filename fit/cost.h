@@ -293,17 +293,32 @@ class GroupCost {
 inline constexpr double kSharpOutsideFalloffFraction = 0.1;
 
 // Veiling glare: a ghost whose outside fall-off is longer than twice a sharp outline's. The
-// frame's glow of many veils, each too faint to see, sums to a smooth pedestal under the ghosts;
-// with every Fo free, the fitter drew that pedestal by softening the outlines of the ghosts it
-// held (Heliar 640×427 at 12°: one ghost, Fo 1048 px, 85 px from the veil it should have held),
-// and without a glare the pedestal is not drawn at all (median PSNR 17 dB instead of 23.6). A
-// glare is seeded as one (fit/detection.h detectGlare) and keeps its long fall-off.
+// frame's glow of many veils, each too faint to see, sums to a pedestal under the ghosts; with
+// every Fo free, the fitter drew that pedestal by softening the outlines of the ghosts it held
+// (Heliar 640×427 at 12°: one ghost, Fo 1048 px, 85 px from the veil it should have held), and
+// without a glare the pedestal is not drawn at all (median PSNR 17 dB instead of 23.6). A glare
+// is seeded as one (fit/detection.h detectGlare), keeps its long fall-off, and is held flat over
+// the frame by its bounds (fitBounds): its outline holds the frame, and only its intensity is
+// fitted. With its outline and fall-offs free, the one glare of a frame drew the large sharp
+// veils' bodies too, softly: on the Heliar 640×427 capture at λ × 1 it was the only ghost of 13
+// of the 17 frames at 12–15.2°, and ghost 19, a disc 18σ bright there, was found in 4 of the 25
+// frames at 12–16.8° (held flat: in 23). On the 640×427 captures (0–30° at 0.2°), means over
+// λ × 0.98, 0.99, 1, 1.01, 1.02 of the model's recall / precision / median PSNR / median
+// centroid error, glare free → flat (bench/fit_accuracy.sh):
+//   Heliar Tronnier: 73.1 → 77.2 %, 81.6 → 87.0 %, 25.8 → 25.4 dB, 7.7 → 8.0 px;
+//   Brendel Tessar:  75.0 → 82.9 %, 69.3 → 72.5 %, 25.5 → 25.2 dB, 10.6 → 10.9 px;
+// the frames' own fits 72.2 → 78.9 %, 79.5 → 87.2 %, 28.7 → 28.8 dB, 7.6 → 6.9 px and
+// 75.8 → 84.6 %, 66.6 → 67.4 %, 27.6 → 28.3 dB, 9.6 → 11.1 px; a fit took 33–37 s and 45–52 s
+// instead of 54 and 52 s (λ × 1). A smooth ramp instead (an inside fall-off of at least W + H,
+// so that the frame lies within it) gave the Heliar 77.9 / 86.4 / 25.4 / 8.4 over the five λ and
+// the Tessar 73.3–76.9 % recall and 62.6–65.2 % precision over λ × 0.98–1, at 79–87 s a fit.
 bool isGlare(const model::GhostParameters& ghost, cv::Size image_size);
 
 // The extra bounds a fitter uses on top of model::parameterBounds: lengths and fall-offs within
 // the image's diagonal, the centre within one image size of the frame, intensities up to
 // `intensity_limit` (GroupCost::intensityLimit); Fo within kSharpOutsideFalloffFraction of the
-// diagonal unless `glare`.
+// diagonal unless `glare`. A glare's bounds hold it flat over the frame (isGlare): centre in the
+// frame, half-sizes 2–4 × (W + H), Fi at most (W + H) / 2, Fo 0.4–1 × the diagonal.
 model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double intensity_limit,
                                  bool glare);
 

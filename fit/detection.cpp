@@ -512,8 +512,10 @@ std::optional<Detection> detectGlare(const cv::Mat& residual, const cv::Mat& val
   g.channels = 1;
   g.center_x = center.x;
   g.center_y = center.y;  // the axis runs through the image centre
-  g.left = g.right = g.height = half_diagonal;
+  // An outline that holds the frame, flat over it (fit/cost.h fitBounds keeps it so).
+  g.left = g.right = g.height = 2.0 * (residual.cols + residual.rows);
   finishSeed(median, median, &g);
+  g.inside_falloff = 0.15 * half_diagonal;
   g.outside_falloff = half_diagonal;
   det.blob = cv::Rect(0, 0, residual.cols, residual.rows);
   det.mask = mask;

@@ -824,7 +824,8 @@ std::string trackEndReason(const GhostParameters& g, cv::Size image_size, double
     // frames from 9° on had none (58 counting in the pixel noise; with these rules 18 and 20),
     // though the glow of the veils too faint to see holds most of their flare (one glare fitted to
     // that glow alone, the visible ghosts exact: 31–46 dB at 12–28°; without a glare 4–17 dB).
-    // The pixels it reaches: its outline's box grown by its outside fall-off.
+    // The pixels it reaches: its outline's box grown by its outside fall-off. (The fitter's own
+    // glare now holds the frame, fit/cost.h fitBounds, and so ends only in the noise.)
     if ((model::ghostPixelBounds(g) & cv::Rect(cv::Point(), image_size)).empty())
       return "left the image";
     return sank ? "sank into the noise" : "";

@@ -509,15 +509,16 @@ TEST(FitCapture, WithThePixelNoiseCountsInTheFramesPixelNoise) {
   }
 }
 
-// A sharp ghost on a broad glow (what many veils, each too faint to see, sum to): the model holds
-// the ghost where it is with its sharp outline, and the glow apart from it as glare.
-TEST(FitCapture, HoldsASharpGhostApartFromTheGlowUnderIt) {
+// A sharp ghost on a pedestal (what many veils far wider than the frame, each too faint to see,
+// sum to): the model holds the ghost where it is with its sharp outline, and the pedestal apart
+// from it as glare, flat over the frame (fit/cost.h isGlare).
+TEST(FitCapture, HoldsASharpGhostApartFromThePedestalUnderIt) {
   FrameStack stack = testStack();
   cv::theRNG().state = 9;
   model::GhostParameters glow;
   glow.center_x = 80;
   glow.center_y = 50;
-  glow.left = glow.right = glow.height = 40;
+  glow.left = glow.right = glow.height = 400;
   glow.border = {0.1, 0, 0};
   glow.inside = {0.1, 0, 0};
   glow.outside_falloff = 100;
@@ -533,7 +534,14 @@ TEST(FitCapture, HoldsASharpGhostApartFromTheGlowUnderIt) {
   int sharp = 0, glare = 0;
   for (const auto& at : r.model.ghostsAt(1.0)) {
     const auto& g = at.parameters;
-    if (isGlare(g, stack.size)) ++glare;
+    if (isGlare(g, stack.size)) {
+      ++glare;
+      std::vector<model::GhostParameters> one = {g};
+      double lo = 0, hi = 0;
+      cv::minMaxLoc(model::renderGhosts(one, stack.size, 1), &lo, &hi);
+      EXPECT_NEAR(lo, 0.1, 0.005);
+      EXPECT_EQ(lo, hi) << "the glare is flat over the frame";
+    }
     if (std::abs(g.center_x - 68) < 0.5 && std::abs(g.left - 15) < 1 && std::abs(g.right - 15) < 1 &&
         g.outside_falloff < 5)
       ++sharp;
