@@ -1292,13 +1292,14 @@ class CaptureFitter {
       for (auto& veil : detectVeilEdges(residual, level.valid, level.noise_sigma, light, options_.detection))
         candidates.push_back(std::move(veil));
     // Glare first: the sharp ghosts are then fitted on top of it, not softened to cover it.
-    // Where the glare has already taken a faint disc's body (Heliar 640×427, 12–14°: ghost 19), a
-    // candidate fitted jointly with the glare, so that the glare could give the disc back, found
-    // that disc at λ = 1 (ghost 19 in 22 of 26 frames at 11–16°, against 1) but not at λ × 0.99
-    // or 1.01, and the means over the three (recall / precision / median PSNR / median centroid
-    // error) moved both ways: Heliar 71.2 → 69.1 %, 86.5 → 88.1 %, 24.0 → 24.4 dB, 8.8 → 9.6 px;
-    // Tessar 51.4 → 52.0 %, 78.0 → 75.3 %, 22.5 → 23.6 dB, 15.6 → 13.5 px. Candidates are fitted
-    // against the glare as it stands.
+    // Where a glare free to take any outline had taken a faint disc's body (Heliar 640×427,
+    // 12–14°: ghost 19; it is held flat now, fit/cost.h isGlare, and cannot), a candidate fitted
+    // jointly with the glare, so that the glare could give the disc back, found that disc at
+    // λ = 1 (ghost 19 in 22 of 26 frames at 11–16°, against 1) but not at λ × 0.99 or 1.01, and
+    // the means over the three (recall / precision / median PSNR / median centroid error) moved
+    // both ways: Heliar 71.2 → 69.1 %, 86.5 → 88.1 %, 24.0 → 24.4 dB, 8.8 → 9.6 px; Tessar
+    // 51.4 → 52.0 %, 78.0 → 75.3 %, 22.5 → 23.6 dB, 15.6 → 13.5 px. Candidates are fitted against
+    // the glare as it stands.
     if (options_.detection.find_glare &&
         std::none_of(ghosts.begin(), ghosts.end(), [&](const GhostParameters& g) { return isGlare(g, stack_.size); }))
       if (auto glare = detectGlare(residual, level.valid, level.noise_sigma, light, options_.detection))

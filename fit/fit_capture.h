@@ -10,8 +10,9 @@
 //     estimate initial parameters for neighboring images"); ghosts whose regions overlap are
 //     fitted together (fit/group_solver.h). Then the residual (frame minus all fitted ghosts) is
 //     searched for new ghosts (fit/detection.h): veiling glare first while none is modelled (the
-//     glow of veils too faint to see one by one, the only ghost whose outline may be soft:
-//     fit/cost.h isGlare), then blobs; each new one is fitted and kept when it explains its blob.
+//     pedestal of veils too faint to see one by one, flat over the frame, the only ghost whose
+//     outline is soft: fit/cost.h isGlare), then blobs; each new one is fitted and kept when it
+//     explains its blob.
 //     The frame where a ghost is first found is its key frame.
 //  2. Backward sweep: every ghost is tracked from its key frame towards smaller angles too (ghosts
 //     are hardest to see near the light, where the sweep starts), the whole frame refitted with
