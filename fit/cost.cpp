@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 
 #include <opencv2/imgproc.hpp>
@@ -149,9 +150,46 @@ bool isGlare(const model::GhostParameters& ghost, cv::Size size) {
   return ghost.outside_falloff > 2 * kSharpOutsideFalloffFraction * std::hypot(size.width, size.height);
 }
 
+namespace {
+
+// The pedestal's bounds (isGlare) on its centre, half-sizes and fall-offs, within the model's
+// own: half-sizes of at least a = 2 (W + H) (at most 0.8 × the model's largest), the centre within
+// f × the frame's size of its middle. A diamond of half-sizes a is the smallest outline whatever
+// Cl and Cr; a frame pixel's |dx| / a + |dy| / a is at most n = (1/2 + f)(W + H) / a, so it lies
+// at least (1 − n) a / √2 inside the outline, beyond an inside fall-off of at most (1 − n) a / 2:
+// the glare is Ii over the whole frame. Up to W + H = 4000 px, a = 2 (W + H), f = 1/2 (the centre
+// anywhere in the frame) and Fi's limit is (W + H) / 2; beyond, f shrinks to 0.01, and the
+// guarantee holds while n < 1 (W + H below 15 686 px). Fo stays above isGlare's limit. Nothing
+// for the other parameters.
+std::optional<model::ParameterBounds> glareBounds(int index, int channels, cv::Size size) {
+  using namespace model::param;
+  const model::ParameterLayout layout{channels};
+  model::ParameterBounds b = model::parameterBounds(index, channels);
+  auto clamp = [&](double lo, double hi) {
+    b.lower = std::max(b.lower, lo);
+    b.upper = std::min(b.upper, hi);
+    return b;
+  };
+  const double span = size.width + size.height;
+  const double a = std::min(2 * span, 0.8 * model::parameterBounds(kL, channels).upper);
+  const double f = std::clamp(a / (2 * span) - 0.5, 0.01, 0.5);
+  const double n = (0.5 + f) * span / a;
+  const double diag = std::hypot(size.width, size.height);
+  if (index == kMx) return clamp((0.5 - f) * size.width, (0.5 + f) * size.width);
+  if (index == kMy) return clamp((0.5 - f) * size.height, (0.5 + f) * size.height);
+  if (index == kL || index == kR || index == kH) return clamp(a, 4 * span);
+  if (index == layout.fi()) return clamp(0.3, std::max(1.0, 0.5 * std::max(0.0, 1 - n) * a));
+  if (index == layout.fo()) return clamp(4 * kSharpOutsideFalloffFraction * diag, diag);
+  return std::nullopt;
+}
+
+}  // namespace
+
 model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double intensity_limit,
                                  bool glare) {
   using namespace model::param;
+  if (glare)
+    if (auto b = glareBounds(index, channels, size)) return *b;
   const model::ParameterLayout layout{channels};
   model::ParameterBounds b = model::parameterBounds(index, channels);
   const double diag = std::hypot(size.width, size.height);
@@ -164,19 +202,7 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   else if (index == kL || index == kR || index == kH) clamp(0.5, diag);
   else if (index >= layout.ib(0) && index < layout.fi()) clamp(0, intensity_limit);
   else if (index == layout.fi()) clamp(0.3, diag);
-  else if (index == layout.fo()) clamp(0.3, glare ? diag : kSharpOutsideFalloffFraction * diag);
-  if (glare) {
-    // The pedestal (isGlare): with the centre in the frame and half-sizes of at least 2 (W + H),
-    // every pixel of the frame lies at least (W + H) / √2 inside the outline, whatever Cl and Cr
-    // (a diamond of those half-sizes is the smallest such outline), beyond an inside fall-off of
-    // at most (W + H) / 2: the glare is Ii over the whole frame. Fo stays above isGlare's limit.
-    const double span = size.width + size.height;
-    if (index == kMx) b = {0.0, static_cast<double>(size.width)};
-    else if (index == kMy) b = {0.0, static_cast<double>(size.height)};
-    else if (index == kL || index == kR || index == kH) b = {2 * span, 4 * span};
-    else if (index == layout.fi()) b = {0.3, 0.5 * span};
-    else if (index == layout.fo()) b = {4 * kSharpOutsideFalloffFraction * diag, diag};
-  }
+  else if (index == layout.fo()) clamp(0.3, kSharpOutsideFalloffFraction * diag);
   return b;
 }
 

@@ -317,8 +317,9 @@ bool isGlare(const model::GhostParameters& ghost, cv::Size image_size);
 // The extra bounds a fitter uses on top of model::parameterBounds: lengths and fall-offs within
 // the image's diagonal, the centre within one image size of the frame, intensities up to
 // `intensity_limit` (GroupCost::intensityLimit); Fo within kSharpOutsideFalloffFraction of the
-// diagonal unless `glare`. A glare's bounds hold it flat over the frame (isGlare): centre in the
-// frame, half-sizes 2–4 × (W + H), Fi at most (W + H) / 2, Fo 0.4–1 × the diagonal.
+// diagonal unless `glare`. A glare's bounds hold it flat over the frame (isGlare), within the
+// model's own: for frames up to W + H = 4000 px, centre in the frame, half-sizes 2–4 × (W + H), Fi
+// at most (W + H) / 2, Fo 0.4–1 × the diagonal (cost.cpp glareBounds for larger frames).
 model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double intensity_limit,
                                  bool glare);
 
