@@ -466,17 +466,6 @@ CaptureSummary Session::run() {
       manifest_["frames"].push_back(f);
     }
     summary_.frames_already_done = static_cast<int>(done.size());
-    // A capture killed while writing leaves at worst hidden ".<name>.tmp-XXXXXX<ext>" files of
-    // the atomic writes (common/atomic_file.h); they belong to no frame: remove them.
-    std::error_code ec;
-    std::vector<fs::path> stray;
-    for (auto it = fs::recursive_directory_iterator(out_, ec); !ec && it != fs::end(it);
-         it.increment(ec)) {
-      const std::string n = it->path().filename().string();
-      if (it->is_regular_file() && n.size() > 1 && n[0] == '.' && n.find(".tmp-") != std::string::npos)
-        stray.push_back(it->path());
-    }
-    for (const auto& p : stray) fs::remove(p, ec);
     logInfo("Resuming " + out_.string() + ": " + std::to_string(done.size()) + " of " +
             std::to_string(angles_.size()) + " frames done");
   } else {
@@ -487,6 +476,21 @@ CaptureSummary Session::run() {
     if (fs::exists(out_) && !fs::is_directory(out_))
       throw InputError(out_.string() + ": exists and is not a folder");
     manifest_ = newManifest();
+  }
+  // A capture killed while writing leaves at worst hidden ".<name>.tmp-XXXXXX<ext>" files of the
+  // atomic writes (common/atomic_file.h); they belong to no frame: remove them. Resumed or not: a
+  // capture killed during its first manifest write has a stray temporary and no manifest, and is
+  // started again without --resume.
+  {
+    std::error_code ec;
+    std::vector<fs::path> stray;
+    for (auto it = fs::recursive_directory_iterator(out_, ec); !ec && it != fs::end(it);
+         it.increment(ec)) {
+      const std::string n = it->path().filename().string();
+      if (it->is_regular_file() && n.size() > 1 && n[0] == '.' && n.find(".tmp-") != std::string::npos)
+        stray.push_back(it->path());
+    }
+    for (const auto& p : stray) fs::remove(p, ec);
   }
   fs::create_directories(out_ / "frames");
   manifest_["frames_done"] = static_cast<int>(manifest_["frames"].size());

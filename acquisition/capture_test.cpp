@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <random>
 
 #include <opencv2/imgproc.hpp>
@@ -151,6 +152,22 @@ TEST(Capture, WritesFramesTruthAndManifest) {
   CaptureSummary again = runCapture(rig, d, plan, dir.path() / "cap", resume);
   EXPECT_EQ(again.frames_captured, 0);
   EXPECT_EQ(again.frames_already_done, 5);
+}
+
+// A capture killed during its first manifest write leaves a stray temporary and no manifest; it is
+// started again without --resume, and the new capture clears the stray.
+TEST(Capture, AFreshCaptureRemovesTheStrayTemporariesOfAKilledOne) {
+  testing::TempDir dir;
+  Rig rig = testRig();
+  RigDevices d = devices(rig);
+  const fs::path out = dir.path() / "cap";
+  fs::create_directories(out / "frames");
+  std::ofstream(out / ".manifest.tmp-ab12cd.json") << "{\"format\": \"flarekit.cap";
+  std::ofstream(out / "frames" / ".frame_0000.tmp-ef34gh.exr") << "half";
+  CaptureSummary s = runCapture(rig, d, smallPlan(), out);
+  EXPECT_EQ(s.termination, "complete");
+  for (const auto& e : fs::recursive_directory_iterator(out))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
 }
 
 TEST(Capture, StopsAfterTheCurrentFrameAndResumesExactly) {
