@@ -43,7 +43,12 @@
 // not (the part of a ghost beyond the frame's edge, the far side of a ghost cut by the light's
 // clipped core) it keeps the parameter where the track says instead of letting it drift to a
 // bound: measured on the Heliar capture, a ghost cropped by the frame had its unseen R run from
-// 218 px to 714 px over two frames without it.
+// 218 px to 714 px over two frames without it. A tighter prior on the unseen parts only (σ × 0.1
+// for an outline point beyond the frame's edge, and for h when both its ends are) held the large
+// veils' sides no better where it counts: on the 640×427 captures over λ × 0.98–1.02 (recall % /
+// precision % / median PSNR dB / median centroid error px, bench/fit_accuracy.sh), Heliar
+// 77.6 / 84.1 / 24.2 / 6.6 against 77.2 / 87.0 / 25.4 / 8.0, Tessar 84.2 / 71.1 / 25.2 / 10.0
+// against 82.9 / 72.5 / 25.2 / 10.9.
 //
 // Derivatives: the model is linear in nothing but Ib, Ii, yet every parameter's derivative image
 // is analytic (model/'s renderer, envelope theorem at the fixed nearest point); E is linear, so
@@ -320,6 +325,11 @@ bool isGlare(const model::GhostParameters& ghost, cv::Size image_size);
 // diagonal unless `glare`. A glare's bounds hold it flat over the frame (isGlare), within the
 // model's own: for frames up to W + H = 4000 px, centre in the frame, half-sizes 2–4 × (W + H), Fi
 // at most (W + H) / 2, Fo 0.4–1 × the diagonal (cost.cpp glareBounds for larger frames).
+// The exponents Ei, Eo keep the model's [0.1, 10]. Held at ≥ 0.5 for sharp ghosts (so that no
+// ghost becomes a rim thinner than a pixel, Ei = Eo = 0.1), the Heliar 640×427 model over
+// λ × 0.98–1.02 gave 72.6 / 87.3 / 25.3 / 7.2 (recall % / precision % / median PSNR dB / median
+// centroid error px) against 77.2 / 87.0 / 25.4 / 8.0, and the Tessar 72.9 % recall at λ × 0.98
+// against 83.0 (the flat glare's fitter, bench/fit_accuracy.sh).
 model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double intensity_limit,
                                  bool glare);
 
