@@ -477,21 +477,10 @@ CaptureSummary Session::run() {
       throw InputError(out_.string() + ": exists and is not a folder");
     manifest_ = newManifest();
   }
-  // A capture killed while writing leaves at worst hidden ".<name>.tmp-XXXXXX<ext>" files of the
-  // atomic writes (common/atomic_file.h); they belong to no frame: remove them. Resumed or not: a
-  // capture killed during its first manifest write has a stray temporary and no manifest, and is
-  // started again without --resume.
-  {
-    std::error_code ec;
-    std::vector<fs::path> stray;
-    for (auto it = fs::recursive_directory_iterator(out_, ec); !ec && it != fs::end(it);
-         it.increment(ec)) {
-      const std::string n = it->path().filename().string();
-      if (it->is_regular_file() && n.size() > 1 && n[0] == '.' && n.find(".tmp-") != std::string::npos)
-        stray.push_back(it->path());
-    }
-    for (const auto& p : stray) fs::remove(p, ec);
-  }
+  // A capture killed while writing leaves at worst stray temporaries of the atomic writes; they
+  // belong to no frame. Resumed or not: a capture killed during its first manifest write has a
+  // stray temporary and no manifest, and is started again without --resume.
+  removeStrayTemporaries(out_);
   fs::create_directories(out_ / "frames");
   manifest_["frames_done"] = static_cast<int>(manifest_["frames"].size());
   writeManifest();

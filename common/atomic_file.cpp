@@ -8,6 +8,7 @@
 #include <fstream>
 #include <random>
 #include <sstream>
+#include <vector>
 
 #include "common/error.h"
 
@@ -43,6 +44,19 @@ fs::path temporaryNameFor(const fs::path& path) {
 }
 
 }  // namespace
+
+void removeStrayTemporaries(const fs::path& folder) {
+  std::error_code ec;
+  std::vector<fs::path> stray;
+  for (auto it = fs::recursive_directory_iterator(folder, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    const std::string n = it->path().filename().string();
+    // The names temporaryNameFor makes.
+    if (it->is_regular_file() && n.size() > 1 && n[0] == '.' && n.find(".tmp-") != std::string::npos)
+      stray.push_back(it->path());
+  }
+  for (const auto& p : stray) fs::remove(p, ec);
+}
 
 void checkWritable(const fs::path& path) {
   fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();

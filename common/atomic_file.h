@@ -26,6 +26,11 @@ void writeFileAtomically(const std::filesystem::path& path,
 // Writes `content` to `path` atomically.
 void writeTextFileAtomically(const std::filesystem::path& path, std::string_view content);
 
+// Removes, under `folder` and its subfolders, the stray temporaries ".<name>.tmp-XXXXXX<ext>" that
+// writers killed mid-write left (they belong to no file), so that a folder resumed or written
+// again holds only whole files. Errors are ignored: a stray that cannot be removed is harmless.
+void removeStrayTemporaries(const std::filesystem::path& folder);
+
 // Reads a whole file; throws InputError("<path>: cannot read ...") when it is missing.
 std::string readTextFile(const std::filesystem::path& path);
 

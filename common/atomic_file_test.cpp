@@ -37,6 +37,27 @@ TEST(AtomicFile, WritesAndReplaces) {
   EXPECT_EQ(countEntries(dir.path()), 1);  // no temporary left behind
 }
 
+// What a killed writer leaves, in the folder and below, goes; whole files stay, hidden or not.
+TEST(AtomicFile, RemovesStrayTemporariesAndNothingElse) {
+  TempDir dir;
+  fs::create_directories(dir / "frames");
+  std::ofstream(dir / ".manifest.tmp-ab12cd.json") << "{";
+  std::ofstream(dir / "frames" / ".frame_0000.tmp-ef34gh.exr") << "half";
+  writeTextFileAtomically(dir / "manifest.json", "{}");
+  writeTextFileAtomically(dir / "frames" / "frame_0000.exr", "whole");
+  writeTextFileAtomically(dir / ".hidden", "kept");
+  writeTextFileAtomically(dir / "notes.tmp-1.txt", "kept");
+  removeStrayTemporaries(dir.path());
+  EXPECT_FALSE(fs::exists(dir / ".manifest.tmp-ab12cd.json"));
+  EXPECT_FALSE(fs::exists(dir / "frames" / ".frame_0000.tmp-ef34gh.exr"));
+  EXPECT_EQ(slurp(dir / "manifest.json"), "{}");
+  EXPECT_EQ(slurp(dir / "frames" / "frame_0000.exr"), "whole");
+  EXPECT_EQ(slurp(dir / ".hidden"), "kept");
+  EXPECT_EQ(slurp(dir / "notes.tmp-1.txt"), "kept");
+  EXPECT_EQ(countEntries(dir.path()), 4);
+  EXPECT_EQ(countEntries(dir / "frames"), 1);
+}
+
 TEST(AtomicFile, FailedWriterLeavesOldFileAndNoTemporary) {
   TempDir dir;
   writeTextFileAtomically(dir / "a.txt", "old");
