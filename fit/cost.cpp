@@ -152,6 +152,14 @@ bool isGlare(const model::GhostParameters& ghost, cv::Size size) {
 
 namespace {
 
+// The model's bounds on parameter `index` (model::parameterBounds) intersected with [lo, hi].
+model::ParameterBounds modelBoundsWithin(int index, int channels, double lo, double hi) {
+  model::ParameterBounds b = model::parameterBounds(index, channels);
+  b.lower = std::max(b.lower, lo);
+  b.upper = std::min(b.upper, hi);
+  return b;
+}
+
 // The pedestal's bounds (isGlare) on its centre, half-sizes and fall-offs, within the model's
 // own: half-sizes of at least a = 2 (W + H) (at most 0.8 × the model's largest), the centre within
 // f × the frame's size of its middle. A diamond of half-sizes a is the smallest outline whatever
@@ -164,12 +172,7 @@ namespace {
 std::optional<model::ParameterBounds> glareBounds(int index, int channels, cv::Size size) {
   using namespace model::param;
   const model::ParameterLayout layout{channels};
-  model::ParameterBounds b = model::parameterBounds(index, channels);
-  auto clamp = [&](double lo, double hi) {
-    b.lower = std::max(b.lower, lo);
-    b.upper = std::min(b.upper, hi);
-    return b;
-  };
+  auto clamp = [&](double lo, double hi) { return modelBoundsWithin(index, channels, lo, hi); };
   const double span = size.width + size.height;
   const double a = std::min(2 * span, 0.8 * model::parameterBounds(kL, channels).upper);
   const double f = std::clamp(a / (2 * span) - 0.5, 0.01, 0.5);
@@ -191,19 +194,15 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   if (glare)
     if (auto b = glareBounds(index, channels, size)) return *b;
   const model::ParameterLayout layout{channels};
-  model::ParameterBounds b = model::parameterBounds(index, channels);
   const double diag = std::hypot(size.width, size.height);
-  auto clamp = [&](double lo, double hi) {
-    b.lower = std::max(b.lower, lo);
-    b.upper = std::min(b.upper, hi);
-  };
-  if (index == kMx) clamp(-size.width, 2.0 * size.width);
-  else if (index == kMy) clamp(-size.height, 2.0 * size.height);
-  else if (index == kL || index == kR || index == kH) clamp(0.5, diag);
-  else if (index >= layout.ib(0) && index < layout.fi()) clamp(0, intensity_limit);
-  else if (index == layout.fi()) clamp(0.3, diag);
-  else if (index == layout.fo()) clamp(0.3, kSharpOutsideFalloffFraction * diag);
-  return b;
+  auto clamp = [&](double lo, double hi) { return modelBoundsWithin(index, channels, lo, hi); };
+  if (index == kMx) return clamp(-size.width, 2.0 * size.width);
+  if (index == kMy) return clamp(-size.height, 2.0 * size.height);
+  if (index == kL || index == kR || index == kH) return clamp(0.5, diag);
+  if (index >= layout.ib(0) && index < layout.fi()) return clamp(0, intensity_limit);
+  if (index == layout.fi()) return clamp(0.3, diag);
+  if (index == layout.fo()) return clamp(0.3, kSharpOutsideFalloffFraction * diag);
+  return model::parameterBounds(index, channels);
 }
 
 std::vector<model::ParameterBounds> fitBounds(const GroupCost& cost, const model::GhostParameters& seed) {
