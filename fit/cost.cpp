@@ -205,6 +205,21 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   return model::parameterBounds(index, channels);
 }
 
+void shapeGlareSeed(cv::Size image_size, model::GhostParameters* glare) {
+  using namespace model::param;
+  const model::ParameterLayout layout{glare->channels};
+  auto within = [&](int index, double value) {
+    const auto b = fitBounds(index, glare->channels, image_size, 0, true);
+    return std::clamp(value, b.lower, b.upper);
+  };
+  const double half_diagonal = 0.5 * std::hypot(image_size.width, image_size.height);
+  glare->center_x = within(kMx, image_size.width / 2.0);
+  glare->center_y = within(kMy, image_size.height / 2.0);
+  glare->left = glare->right = glare->height = fitBounds(kL, glare->channels, image_size, 0, true).lower;
+  glare->inside_falloff = within(layout.fi(), 0.15 * half_diagonal);
+  glare->outside_falloff = within(layout.fo(), half_diagonal);
+}
+
 std::vector<model::ParameterBounds> fitBounds(const GroupCost& cost, const model::GhostParameters& seed) {
   const bool glare = isGlare(seed, cost.imageSize());
   std::vector<model::ParameterBounds> bounds;

@@ -333,6 +333,14 @@ bool isGlare(const model::GhostParameters& ghost, cv::Size image_size);
 model::ParameterBounds fitBounds(int index, int channels, cv::Size image_size, double intensity_limit,
                                  bool glare);
 
+// Sets a glare seed's centre, half-sizes and fall-offs for a frame of `image_size`, within its
+// fitBounds there (glare): centred on the frame, half-sizes at their lower bound (the smallest
+// outline that holds the frame flat), an inside fall-off of 0.15 × the half diagonal and an
+// outside one of the half diagonal, each clamped to its bounds. The glare's bounds are not
+// proportional to the frame (cost.cpp glareBounds), so a seed shaped at a detection level and
+// scaled up is shaped again at the capture's size. Its intensities are left as they are.
+void shapeGlareSeed(cv::Size image_size, model::GhostParameters* glare);
+
 // Every parameter's fitBounds, in vector order, for a ghost of `cost`'s group seeded as `seed`
 // (glare or not as the seed is): the bounds the solvers keep it within.
 std::vector<model::ParameterBounds> fitBounds(const GroupCost& cost, const model::GhostParameters& seed);

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/image.h"
+#include "fit/cost.h"
 
 namespace flarekit::fit {
 
@@ -506,17 +507,12 @@ std::optional<Detection> detectGlare(const cv::Mat& residual, const cv::Mat& val
   Detection det;
   det.level_sigma = options.glare_sigma;
   det.peak = median;
-  const double half_diagonal = 0.5 * std::hypot(residual.cols, residual.rows);
-  const cv::Point2d center(residual.cols / 2.0, residual.rows / 2.0);
   model::GhostParameters& g = det.seed;
   g.channels = 1;
-  g.center_x = center.x;
-  g.center_y = center.y;  // the axis runs through the image centre
-  // An outline that holds the frame, flat over it (fit/cost.h fitBounds keeps it so).
-  g.left = g.right = g.height = 2.0 * (residual.cols + residual.rows);
   finishSeed(median, median, &g);
-  g.inside_falloff = 0.15 * half_diagonal;
-  g.outside_falloff = half_diagonal;
+  // An outline that holds the frame, flat over it, centred where the axis runs through the image
+  // centre: the shape fitBounds keeps a glare within.
+  shapeGlareSeed(residual.size(), &g);
   det.blob = cv::Rect(0, 0, residual.cols, residual.rows);
   det.mask = mask;
   return det;

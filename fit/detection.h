@@ -188,10 +188,9 @@ std::vector<Detection> detectGhosts(const cv::Mat& residual, const cv::Mat& vali
 
 // Veiling glare (fit/cost.h isGlare): when the median of `residual` over the valid pixels away from
 // the light's clipped core is above glare_sigma × `noise_sigma`, a seed flat over the frame at
-// that median (Ib = Ii), centred on the flare axis at the image centre, with half-sizes of
-// 2 × (width + height) (its outline holds the frame, as fit/cost.h fitBounds keeps it), an inside
-// fall-off of 0.15 × the half diagonal and an outside one of the half diagonal; its blob is those
-// pixels. Nothing otherwise.
+// that median (Ib = Ii), shaped for the residual's size by fit/cost.h shapeGlareSeed (centred on
+// the flare axis at the image centre, its outline holding the frame within the glare's bounds);
+// its blob is those pixels. Nothing otherwise.
 std::optional<Detection> detectGlare(const cv::Mat& residual, const cv::Mat& valid, double noise_sigma,
                                      const LightImage& light, const DetectionOptions& options);
 

@@ -108,6 +108,29 @@ TEST(DetectGlare, SeedsGlareOnAPedestalAndNothingOnNoiseOrAGhost) {
   EXPECT_FALSE(detectGlare(noisy({disc(160, 107, 60, 30 * sigma)}, size, sigma), valid, sigma, kNoLight, options).has_value());
 }
 
+// The glare's seed lies within the bounds its fit keeps it in (fit/cost.h fitBounds), for a
+// small frame and for a 12-megapixel one, where 2 × (W + H) would be beyond the model's own
+// bounds. A pedestal of 4σ all over the frame.
+TEST(DetectGlare, SeedsWithinTheGlaresBoundsAtAnyFrameSize) {
+  for (const cv::Size size : {cv::Size(320, 214), cv::Size(4000, 3000)}) {
+    SCOPED_TRACE(size);
+    const double sigma = 1e-3;
+    const cv::Mat valid(size, CV_8U, cv::Scalar(255));
+    cv::Mat residual(size, CV_32F);
+    cv::theRNG().state = 7;
+    cv::randn(residual, 4 * sigma, sigma);
+    const auto glare = detectGlare(residual, valid, sigma, kNoLight, DetectionOptions{});
+    ASSERT_TRUE(glare.has_value());
+    ASSERT_TRUE(isGlare(glare->seed, size));
+    const std::vector<double> v = model::toParameterVector(glare->seed);
+    for (int k = 0; k < static_cast<int>(v.size()); ++k) {
+      const auto b = fitBounds(k, 1, size, 1.0, true);
+      EXPECT_GE(v[k], b.lower) << "parameter " << k;
+      EXPECT_LE(v[k], b.upper) << "parameter " << k;
+    }
+  }
+}
+
 // A light 20 px from the frame's left border: its halo and the starburst's spikes reach 100 px into
 // the frame, where the mirror points lie outside it. They are taken away there as well (the light
 // is the same in every direction), the ghost beside them is kept.

@@ -1333,6 +1333,7 @@ class CaptureFitter {
       grey.height *= kd;
       grey.inside_falloff *= kd;
       grey.outside_falloff *= kd;
+      if (isGlare(grey, stack_.size)) shapeGlareSeed(stack_.size, &grey);
       const cv::Rect blob(c.blob.x * kd, c.blob.y * kd, c.blob.width * kd, c.blob.height * kd);
       GhostParameters seed = toChannels(grey, data.full().image, blob);
       bool duplicate = false;
