@@ -12,8 +12,9 @@
 # range, can tell only changes larger than it.
 #
 #   bench/fit_accuracy.sh [--lenses "heliar tessar"] [--lambdas "0.99 1 1.01"] [--holdout]
-#                         [--out DIR] [--flarekit BIN] [-- more flarekit fit options]
+#                         [--out DIR] [--flarekit BIN] [--eval-only] [-- more flarekit fit options]
 #
+# --eval-only rates the fits already in DIR again (after a change to fit-eval) without fitting.
 # --holdout fits every other frame (fit --holdout odd) and rates the model on the frames it left
 # out (fit-eval --frames odd). A fit takes 1–2 min on 2 cores. Needs jq.
 set -euo pipefail
@@ -24,6 +25,7 @@ lambdas="0.99 1 1.01"
 out=${TMPDIR:-/tmp}/flarekit-fit-accuracy
 flarekit=$here/build/bin/flarekit
 holdout=0
+eval_only=0
 while (($#)); do
   case $1 in
     --lenses) lenses=$2; shift 2 ;;
@@ -31,6 +33,7 @@ while (($#)); do
     --out) out=$2; shift 2 ;;
     --flarekit) flarekit=$2; shift 2 ;;
     --holdout) holdout=1; shift ;;
+    --eval-only) eval_only=1; shift ;;
     --) shift; break ;;
     *) echo "fit_accuracy.sh: unknown option $1 (see the comment at the top)" >&2; exit 2 ;;
   esac
@@ -57,7 +60,7 @@ for lens in $lenses; do
     mkdir -p "$run"
     args=("$capture" --edge-weight "$lambda" --out "$run/model.json" --report "$run/report")
     ((holdout)) && args+=(--holdout odd)
-    "$flarekit" -q fit "${args[@]}" "$@"
+    ((eval_only)) || "$flarekit" -q fit "${args[@]}" "$@"
     "$flarekit" -q fit-eval "$run/model.json" "$capture" "${eval_args[@]}" --json >"$run/eval_model.json"
     line="$(figures "$run/eval_model.json")"
     if ((!holdout)); then

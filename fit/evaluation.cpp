@@ -147,6 +147,10 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
   // Model ghosts, one by one.
   std::vector<Blob> model_blobs;
   for (const auto& g : ghosts) {
+    if (isGlare(g.parameters, stack.size)) {
+      ++fe.glare_ghosts;
+      continue;
+    }
     const cv::Rect box = model::ghostPixelBounds(g.parameters) & image;
     Blob b;
     b.id = g.id;
@@ -307,6 +311,7 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
     ev.true_ghosts_found += fe->true_ghosts_found;
     ev.model_ghosts += fe->model_ghosts;
     ev.model_ghosts_matched += fe->model_ghosts_matched;
+    ev.glare_ghosts += fe->glare_ghosts;
     ev.frames.push_back(std::move(*fe));
   }
   // Per true ghost, over the frames.
@@ -400,6 +405,7 @@ nlohmann::json Evaluation::toJson() const {
   j["true_ghosts_found"] = true_ghosts_found;
   j["model_ghosts"] = model_ghosts;
   j["model_ghosts_matched"] = model_ghosts_matched;
+  j["glare_ghosts"] = glare_ghosts;
   nlohmann::json fs = nlohmann::json::array();
   for (const auto& f : frames) {
     fs.push_back({{"angle_deg", f.angle_deg},
@@ -410,6 +416,7 @@ nlohmann::json Evaluation::toJson() const {
                   {"true_ghosts_found", f.true_ghosts_found},
                   {"model_ghosts", f.model_ghosts},
                   {"model_ghosts_matched", f.model_ghosts_matched},
+                  {"glare_ghosts", f.glare_ghosts},
                   {"median_centroid_error_px", number(f.medianCentroidErrorPx())},
                   {"missed_true_ids", f.missed_true_ids},
                   {"matched", matched(f)},
@@ -444,7 +451,8 @@ std::string Evaluation::BriefReport() const {
     s << "median PSNR vs noise-free flare " << median_psnr_db << " dB, median centroid error "
       << median_centroid_error_px << " px, recall " << 100 * recall << " % (" << true_ghosts_found
       << "/" << true_ghosts_visible << "), precision " << 100 * precision << " % ("
-      << model_ghosts_matched << "/" << model_ghosts << "); ";
+      << model_ghosts_matched << "/" << model_ghosts << ", glare not counted: " << glare_ghosts
+      << " in all frames); ";
   s << "median PSNR vs capture " << median_capture_psnr_db << " dB.";
   // The ghosts missed most, up to three.
   std::vector<TrueGhostSummary> missed;
