@@ -207,8 +207,7 @@ GhostParameters extrapolate(const std::vector<double>& angles, const std::vector
 
 namespace {
 
-bool polynomialWithinBounds(const model::Polynomial& p, int index, int channels, double lo, double hi) {
-  const auto b = model::parameterBounds(index, channels);
+bool polynomialWithinBounds(const model::Polynomial& p, const model::ParameterBounds& b, double lo, double hi) {
   // A small margin: the model file's own check samples the range with its own rounding.
   const double margin_lo = 1e-6 * std::max(1.0, std::abs(b.lower));
   const double margin_hi = b.upper >= model::kUnbounded ? 0 : 1e-6 * std::max(1.0, std::abs(b.upper));
@@ -217,6 +216,10 @@ bool polynomialWithinBounds(const model::Polynomial& p, int index, int channels,
     if (!std::isfinite(v) || v < b.lower + margin_lo || v > b.upper - margin_hi) return false;
   }
   return true;
+}
+
+bool polynomialWithinBounds(const model::Polynomial& p, int index, int channels, double lo, double hi) {
+  return polynomialWithinBounds(p, model::parameterBounds(index, channels), lo, hi);
 }
 
 int autoDegree(const std::vector<double>& a, const std::vector<double>& v) {
@@ -272,7 +275,9 @@ struct ImageLevel {
     const int factor = std::max(1, static_cast<int>(std::sqrt(image_size.area() / pixels)));
     size = cv::Size(std::max(1, image_size.width / factor), std::max(1, image_size.height / factor));
     view.scale = 1.0 / factor;
+    this->image_size = image_size;
   }
+  cv::Size image_size;  // the capture's
   cv::Size size;
   model::ViewTransform view;
 };
@@ -430,6 +435,27 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
   const int n = offset[count];
   std::vector<int> parameter_of(n);  // the parameter of each unknown
   for (int k = 0; k < count; ++k) std::fill(parameter_of.begin() + offset[k], parameter_of.begin() + offset[k + 1], k);
+  // The model's bounds, and a sharp track's outside fall-off within the sharp bound its fits were
+  // held to (fit/cost.h fitBounds), so that a sharp ghost's model is sharp too. With the model's
+  // bounds alone the refinement softened sharp ghosts into glare, as if to draw light of their
+  // neighbours': on the 640×427 captures (0–30° at 0.2°, five λ × 0.98–1.02) the Heliar models
+  // held 175–210 ghost-frames of glare and the Tessar's 209–335, where the frames' fits had one a
+  // frame, 151 (Tessar λ × 1, track 9 at 0.6–2.2°: the fits' Fo 0–77 px, the model's 3167 px).
+  // fit-eval finds no ghost with a glare (fit/evaluation.h), so held, the models' recall rose to
+  // that of the frames' fits; means over the five λ, recall / precision / median PSNR / median
+  // centroid error, model's bounds → held (bench/fit_accuracy.sh):
+  //   Heliar Tronnier: 68.5 → 75.3 %, 82.1 → 82.1 %, 25.4 → 25.0 dB, 7.4 → 7.3 px;
+  //   Brendel Tessar:  66.9 → 77.8 %, 62.5 → 60.0 %, 25.2 → 25.2 dB, 11.1 → 11.6 px;
+  // held out (--holdout odd), Heliar 71.6 → 80.8 %, 76.9 → 78.3 %, 24.5 → 24.6 dB, 7.7 → 7.6 px;
+  // Tessar 63.0 → 74.1 %, 64.9 → 63.1 %, 24.6 → 24.6 dB, 13.1 → 12.5 px. The Heliar's PSNR fell at
+  // every λ (by 0.2–0.6 dB): the light the softened ghosts drew that no fit holds.
+  std::vector<model::ParameterBounds> bounds;
+  for (int k = 0; k < count; ++k) bounds.push_back(model::parameterBounds(k, channels));
+  const cv::Size image = level.image_size;
+  if (std::none_of(t.fits.begin(), t.fits.end(), [&](const GhostParameters& f) { return isGlare(f, image); })) {
+    model::ParameterBounds& fo = bounds[model::ParameterLayout{channels}.fo()];
+    fo.upper = std::min(fo.upper, kSharpOutsideFalloffFraction * std::hypot(image.width, image.height));
+  }
   // Σ_frames w ‖model − fit‖², and with `jtj`, `jtr`: JᵀJ and Jᵀr of that sum.
   auto evaluate = [&](const model::GhostTrack& track, Eigen::MatrixXd* jtj, Eigen::VectorXd* jtr) {
     double cost = 0;
@@ -501,7 +527,7 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
       c.a = delta.segment(offset[k], offset[k + 1] - offset[k]);
       const std::vector<double> change = expanded(c).coefficients;
       for (size_t j = 0; j < change.size(); ++j) to.parameters[k].coefficients[j] += change[j];
-      left[k] = !polynomialWithinBounds(to.parameters[k], k, channels, g.angle_min_deg, g.angle_max_deg);
+      left[k] = !polynomialWithinBounds(to.parameters[k], bounds[k], g.angle_min_deg, g.angle_max_deg);
     }
     return to;
   };
