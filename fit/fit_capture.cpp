@@ -271,11 +271,10 @@ double outlineIoU(const GhostParameters& a, const GhostParameters& b) {
 // about `pixels`: where the model's ghosts are compared with the fits in image space (brightness
 // and outlines, not a pixel's detail).
 struct ImageLevel {
-  ImageLevel(cv::Size image_size, double pixels) {
+  ImageLevel(cv::Size image_size, double pixels) : image_size(image_size) {
     const int factor = std::max(1, static_cast<int>(std::sqrt(image_size.area() / pixels)));
     size = cv::Size(std::max(1, image_size.width / factor), std::max(1, image_size.height / factor));
     view.scale = 1.0 / factor;
-    this->image_size = image_size;
   }
   cv::Size image_size;  // the capture's
   cv::Size size;
