@@ -454,8 +454,8 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
   for (int k = 0; k < count; ++k) bounds.push_back(model::parameterBounds(k, channels));
   const cv::Size image = level.image_size;
   if (std::none_of(t.fits.begin(), t.fits.end(), [&](const GhostParameters& f) { return isGlare(f, image); })) {
-    model::ParameterBounds& fo = bounds[model::ParameterLayout{channels}.fo()];
-    fo.upper = std::min(fo.upper, kSharpOutsideFalloffFraction * std::hypot(image.width, image.height));
+    const int fo = model::ParameterLayout{channels}.fo();
+    bounds[fo].upper = fitBounds(fo, channels, image, model::kUnbounded, false).upper;
   }
   // Σ_frames w ‖model − fit‖², and with `jtj`, `jtr`: JᵀJ and Jᵀr of that sum.
   auto evaluate = [&](const model::GhostTrack& track, Eigen::MatrixXd* jtj, Eigen::VectorXd* jtr) {
