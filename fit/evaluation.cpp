@@ -146,20 +146,23 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
   fe.capture_psnr_db = psnr(model_lum, frame_lum, (model_lum > fe.noise_sigma) & (f.valid > 0));
   // Model ghosts, one by one.
   std::vector<Blob> model_blobs;
+  std::vector<cv::Mat> model_images;  // each blob's luminance over model_boxes
+  std::vector<cv::Rect> model_boxes;
   for (const auto& g : ghosts) {
     if (isGlare(g.parameters, stack.size)) {
       ++fe.glare_ghosts;
       continue;
     }
     const cv::Rect box = model::ghostPixelBounds(g.parameters) & image;
-    Blob b;
+    if (box.empty()) continue;
+    std::vector<model::GhostParameters> one = {g.parameters};
+    cv::Mat lum = luminance(model::renderGhosts(one, box, channels, render));
+    Blob b = describe(lum, box.tl());
     b.id = g.id;
-    if (!box.empty()) {
-      std::vector<model::GhostParameters> one = {g.parameters};
-      b = describe(luminance(model::renderGhosts(one, box, channels, render)), box.tl());
-      b.id = g.id;
-    }
-    if (b.present) model_blobs.push_back(b);
+    if (!b.present) continue;
+    model_blobs.push_back(b);
+    model_images.push_back(lum);
+    model_boxes.push_back(box);
   }
   fe.model_ghosts = static_cast<int>(model_blobs.size());
   if (!stack.has_truth) {
@@ -168,10 +171,14 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
   }
   fe.psnr_db = psnr(model_lum, truth.flare, (truth.flare > fe.noise_sigma) & (f.valid > 0));
   std::vector<Blob> true_blobs;
+  std::vector<cv::Mat> true_images;  // each blob's luminance over the frame
   for (const auto& g : truth.ghosts) {
-    Blob b = describe(luminance(g.image), {0, 0});
+    cv::Mat lum = luminance(g.image);
+    Blob b = describe(lum, {0, 0});
     b.id = g.id;
-    if (b.present) true_blobs.push_back(b);
+    if (!b.present) continue;
+    true_blobs.push_back(b);
+    true_images.push_back(lum);
   }
   // Greedy matching by distance within each true ghost's gate.
   struct Pair {
@@ -224,8 +231,26 @@ FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAn
     }
   }
   for (size_t k = 0; k < model_blobs.size(); ++k) {
-    if (model_match[k] >= 0) ++fe.model_ghosts_matched;
-    else fe.unmatched_model_ids.push_back(model_blobs[k].id);
+    if (model_match[k] >= 0) {
+      ++fe.model_ghosts_matched;
+      continue;
+    }
+    // Whose light it draws (FrameEvaluation::Unmatched).
+    FrameEvaluation::Unmatched u;
+    u.model_id = model_blobs[k].id;
+    cv::Mat drawn = cv::max(model_images[k], 0.0f);
+    const double total = cv::sum(drawn)[0];
+    cv::Mat shared;
+    for (size_t t = 0; t < true_blobs.size(); ++t) {
+      cv::min(drawn, true_images[t](model_boxes[k]), shared);
+      const double part = total > 0 ? cv::sum(cv::max(shared, 0.0f))[0] / total : 0;
+      if (part > u.fraction_in_true) {
+        u.fraction_in_true = part;
+        u.true_id = true_blobs[t].id;
+      }
+    }
+    if (u.piece()) ++fe.model_ghosts_pieces;
+    fe.unmatched.push_back(u);
   }
   return fe;
 }
@@ -312,6 +337,7 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
     ev.model_ghosts += fe->model_ghosts;
     ev.model_ghosts_matched += fe->model_ghosts_matched;
     ev.glare_ghosts += fe->glare_ghosts;
+    ev.model_ghosts_pieces += fe->model_ghosts_pieces;
     ev.frames.push_back(std::move(*fe));
   }
   // Per true ghost, over the frames.
@@ -336,6 +362,9 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
       s.missed_peaks.push_back(m.peak_sigma);
     }
   }
+  for (const auto& fe : ev.frames)
+    for (const auto& u : fe.unmatched)
+      if (auto it = seen.find(u.true_id); u.piece() && it != seen.end()) ++it->second.summary.unmatched_pieces;
   for (auto& [id, s] : seen) {
     s.summary.id = id;
     s.summary.median_radius_px = medianOf(s.radii);
@@ -390,6 +419,16 @@ nlohmann::json matched(const FrameEvaluation& f) {
                  {"centroid_error_px", m.centroid_error_px}});
   return a;
 }
+
+nlohmann::json unmatched(const FrameEvaluation& f) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& u : f.unmatched)
+    a.push_back({{"model_id", u.model_id},
+                 {"true_id", u.true_id},
+                 {"fraction_in_true", u.fraction_in_true},
+                 {"piece", u.piece()}});
+  return a;
+}
 }  // namespace
 
 nlohmann::json Evaluation::toJson() const {
@@ -406,6 +445,7 @@ nlohmann::json Evaluation::toJson() const {
   j["model_ghosts"] = model_ghosts;
   j["model_ghosts_matched"] = model_ghosts_matched;
   j["glare_ghosts"] = glare_ghosts;
+  j["model_ghosts_pieces"] = model_ghosts_pieces;
   nlohmann::json fs = nlohmann::json::array();
   for (const auto& f : frames) {
     fs.push_back({{"angle_deg", f.angle_deg},
@@ -421,7 +461,8 @@ nlohmann::json Evaluation::toJson() const {
                   {"missed_true_ids", f.missed_true_ids},
                   {"matched", matched(f)},
                   {"missed", missed(f)},
-                  {"unmatched_model_ids", f.unmatched_model_ids},
+                  {"model_ghosts_pieces", f.model_ghosts_pieces},
+                  {"unmatched", unmatched(f)},
                   {"ceiling_psnr_db", number(f.ceiling_psnr_db)}});
   }
   j["frames"] = fs;
@@ -433,7 +474,8 @@ nlohmann::json Evaluation::toJson() const {
                         {"frames_visible", g.frames_visible},
                         {"frames_found", g.frames_found},
                         {"median_radius_px", number(g.median_radius_px)},
-                        {"missed_median_peak_sigma", number(g.missed_median_peak_sigma)}};
+                        {"missed_median_peak_sigma", number(g.missed_median_peak_sigma)},
+                        {"unmatched_pieces", g.unmatched_pieces}};
     e["missed_range_deg"] = g.frames_found < g.frames_visible
                                 ? nlohmann::json::array({g.missed_min_deg, g.missed_max_deg})
                                 : nlohmann::json(nullptr);
@@ -469,6 +511,21 @@ std::string Evaluation::BriefReport() const {
       << "°, median peak " << g.missed_median_peak_sigma << " σ, radius " << g.median_radius_px << " px)";
   }
   if (!missed.empty()) s << ".";
+  // Of the unmatched model ghosts, the pieces of true ghosts, and the ghosts drawn in most pieces.
+  if (has_truth && model_ghosts > model_ghosts_matched) {
+    s << " Unmatched model ghosts: " << model_ghosts - model_ghosts_matched << "; "
+      << model_ghosts_pieces << " of them draw a piece of a true ghost";
+    std::vector<TrueGhostSummary> pieces;
+    for (const auto& g : true_ghosts)
+      if (g.unmatched_pieces > 0) pieces.push_back(g);
+    std::stable_sort(pieces.begin(), pieces.end(), [](const TrueGhostSummary& a, const TrueGhostSummary& b) {
+      return a.unmatched_pieces > b.unmatched_pieces;
+    });
+    if (pieces.size() > 3) pieces.resize(3);
+    for (size_t i = 0; i < pieces.size(); ++i)
+      s << (i == 0 ? " (ghost " : ", ghost ") << pieces[i].id << ": " << pieces[i].unmatched_pieces;
+    s << (pieces.empty() ? "." : ").");
+  }
   // Against the model's ceiling: the median loss, and the frames that lost most, up to three.
   if (ceiling_frames > 0) {
     std::vector<const FrameEvaluation*> lost;

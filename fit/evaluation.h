@@ -13,6 +13,8 @@
 //    its intensity-weighted RMS distance from the centroid (R for a uniform disc of radius R).
 //  - Recall: matched visible true ghosts / visible true ghosts. Precision: model ghosts matched to
 //    any true ghost / model ghosts present. Centroid errors over matched visible pairs.
+//  - Each unmatched model ghost: whether it draws a piece of a true ghost (most of its light lies
+//    within that ghost's light) or light no ghost has (FrameEvaluation::Unmatched).
 //  - A glare (fit/cost.h isGlare) is drawn in the model's image, so PSNR counts it, but it is no
 //    detection: held flat over the frame, it draws the pedestal, not any one ghost, and its
 //    centroid is the frame's middle, whatever the ghosts. The large veils' centroids lie within a
@@ -64,6 +66,7 @@ struct FrameEvaluation {
   int model_ghosts = 0;            // model ghosts with any pixel in the image
   int model_ghosts_matched = 0;    // matched to some true ghost
   int glare_ghosts = 0;            // glare, drawn but not matched (not in model_ghosts; see above)
+  int model_ghosts_pieces = 0;     // unmatched model ghosts that are pieces of a true ghost
   // Each matched visible true ghost: its model ghost and how far their centroids are apart.
   struct Matched {
     int true_id = 0, model_id = 0;
@@ -84,7 +87,21 @@ struct FrameEvaluation {
     double nearest_distance_px = 0;   // centroid distance to it
   };
   std::vector<Missed> missed;
-  std::vector<int> unmatched_model_ids;    // model ghosts without a true ghost
+  // Each model ghost without a true ghost, and whose light it draws: the true ghost whose layer
+  // holds the largest part of the model ghost's light, Σ min(model, truth) / Σ model over its
+  // pixels. With at least kPieceFraction of its light in one true ghost it is a piece of that
+  // ghost: the model drew the ghost in several pieces, or drew it with its centroid beyond the
+  // gate (a caustic's bright core apart from its faint body, Brendel Tessar ghost 15 at 3–9°).
+  // With less, it draws light no one true ghost holds (the light's own image, noise, or where
+  // several ghosts overlap). Precision counts both as unmatched; this says which loss is which.
+  struct Unmatched {
+    static constexpr double kPieceFraction = 0.5;
+    int model_id = 0;
+    int true_id = -1;                 // the true ghost holding most of its light (−1: none)
+    double fraction_in_true = 0;      // that part, 0–1
+    bool piece() const { return fraction_in_true >= kPieceFraction; }
+  };
+  std::vector<Unmatched> unmatched;
   // The model's ceiling in this frame (`flarekit fit-ceiling`, Evaluation::setCeiling); NaN where
   // it was not measured or not given.
   double ceiling_psnr_db = std::numeric_limits<double>::quiet_NaN();
@@ -106,6 +123,7 @@ struct TrueGhostSummary {
   double missed_min_deg = 0, missed_max_deg = 0;  // the angles it was missed at (when missed)
   double missed_median_peak_sigma = 0;            // its median peak there, noise σ (NaN when never missed)
   double median_radius_px = 0;                    // over the frames it was visible in
+  int unmatched_pieces = 0;  // unmatched model ghosts, over the frames, that are pieces of it
 };
 
 struct Evaluation {
@@ -117,6 +135,7 @@ struct Evaluation {
   double median_centroid_error_px = 0;
   double recall = 0, precision = 0;
   int true_ghosts_visible = 0, true_ghosts_found = 0, model_ghosts = 0, model_ghosts_matched = 0;
+  int model_ghosts_pieces = 0;  // of the unmatched, pieces of a true ghost (FrameEvaluation::Unmatched)
   int glare_ghosts = 0;  // summed over the frames
   // Against the model's ceiling (setCeiling): the frames it was measured in, and the median of
   // ceiling − PSNR over them (what detection, tracking and the optimizer lost; NaN when none).

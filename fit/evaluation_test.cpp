@@ -131,6 +131,46 @@ TEST(EvaluateModel, AGlareFindsNoGhost) {
   EXPECT_EQ(sharp.glare_ghosts, 0);
 }
 
+// A model ghost matched to no true ghost says whose light it draws: a small disc on the rim of a
+// large true ghost, beyond the gate of its centroid, draws a piece of it; a disc where no ghost is
+// draws light no ghost has.
+TEST(EvaluateModel, AnUnmatchedModelGhostSaysWhetherItDrawsAPieceOfATrueGhost) {
+  TempDir dir;
+  const cv::Mat ghost = render(disc(70, 65, 50, 1e-3));
+  model::FlareModel m = modelOf(disc(70, 65, 50, 1e-3));
+  for (const auto& [id, g] : {std::pair{1, disc(105, 65, 8, 1e-3)}, std::pair{2, disc(170, 65, 8, 1e-3)}}) {
+    model::GhostTrack t = m.ghosts[0];
+    t.id = id;
+    t.parameters.clear();
+    for (double v : model::toParameterVector(g)) t.parameters.push_back({{v}});
+    m.ghosts.push_back(t);
+  }
+  const auto ev = evaluateModel(m, stackOf(dir, ghost, ghost, ghost));
+  ASSERT_EQ(ev.frames.size(), 1u);
+  EXPECT_EQ(ev.true_ghosts_found, 1);
+  EXPECT_EQ(ev.model_ghosts, 3);
+  EXPECT_EQ(ev.model_ghosts_matched, 1);
+  const auto& unmatched = ev.frames[0].unmatched;
+  ASSERT_EQ(unmatched.size(), 2u);
+  EXPECT_EQ(unmatched[0].model_id, 1);  // on the true disc, 35 px from its centroid (gate 12.5)
+  EXPECT_EQ(unmatched[0].true_id, 0);
+  EXPECT_GT(unmatched[0].fraction_in_true, 0.95);
+  EXPECT_TRUE(unmatched[0].piece());
+  EXPECT_EQ(unmatched[1].model_id, 2);  // 50 px beyond the true disc's rim
+  EXPECT_EQ(unmatched[1].true_id, -1);
+  EXPECT_FALSE(unmatched[1].piece());
+  EXPECT_EQ(ev.model_ghosts_pieces, 1);
+  ASSERT_EQ(ev.true_ghosts.size(), 1u);
+  EXPECT_EQ(ev.true_ghosts[0].unmatched_pieces, 1);
+  const auto j = ev.toJson();
+  EXPECT_EQ(j["model_ghosts_pieces"], 1);
+  EXPECT_EQ(j["frames"][0]["unmatched"][0]["piece"], true);
+  EXPECT_EQ(j["frames"][0]["unmatched"][1]["true_id"], -1);
+  EXPECT_NE(ev.BriefReport().find("Unmatched model ghosts: 2; 1 of them draw a piece of a true ghost (ghost 0: 1)"),
+            std::string::npos)
+      << ev.BriefReport();
+}
+
 TEST(EvaluateModel, AMissedGhostSaysWhereItIsAndHowFarTheNearestModelGhostIs) {
   TempDir dir;
   const cv::Mat ghost = render(disc(60, 65, 20, 1e-3));
