@@ -406,7 +406,8 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
 // The unknowns are changes of each polynomial in the centred variable, within the degree it has;
 // the Jacobian is the renderer's derivative images times powers of θ, and the normal equations are
 // built from each frame's Gram matrix of those images. A parameter whose polynomial a step takes
-// out of its bounds inside the range is held where it is from then on.
+// out of its bounds inside the range is held where it is from then on; the mirror axis My is held
+// from the start.
 // Rendered at 10000 pixels (a quarter of the 640×427 frame's): at 20000 the Heliar and Tessar
 // 640×427 models' recall, precision, PSNR and centroid error (means over λ × 0.99 / 1 / 1.01) were
 // the same to 0.3 (% / dB / px), and the Heliar's model step took 8.7 s instead of 14.3 s.
@@ -544,6 +545,17 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
   // → 23.9 / 22.9 dB). With every fit's Fi first cut to the outline's greatest depth,
   // min((L + R)/2, h), and its Ii to match (the same image), it moved both ways (25.4 / 25.8 dB).
   std::vector<bool> held(count, false);
+  // The mirror axis My stays where the fits' polynomial puts it. Ghosts are mirror-symmetric
+  // about the flare axis (Walch et al. 2018 §3.2), and the fits find it (Heliar 640×427, λ × 1:
+  // median 0.3 px off it), but a veil whose top and bottom lie beyond the frame shows the
+  // refinement little of its axis, which it traded against h and the curvatures: in that model
+  // 44 ghost-frames lay more than 5 px off the axis, up to 147 px (track 30, 6.8–13.2°: the fits'
+  // My 211–217 px, the model's 206–286; test BuildFlareModel.RefinedInImageAVeilKeepsTheAxisItsFitsFound);
+  // held, none, at most 4.4 px. Means over λ × 0.98–1.02 on the 640×427 captures (recall % /
+  // precision % / median PSNR dB / median centroid error px, bench/fit_accuracy.sh), free → held:
+  // Heliar 75.3 / 82.1 / 25.0 / 7.3 → 74.9 / 81.6 / 25.1 / 6.9, Tessar 77.8 / 60.0 / 25.2 / 11.6 →
+  // 78.3 / 60.4 / 25.2 / 11.3: within the spread over λ, but each ghost drawn about its axis.
+  held[model::param::kMy] = true;
   constexpr int kMaxIterations = 10;
   for (int it = 0, rejected = 0; it < kMaxIterations && rejected < 8;) {
     Eigen::MatrixXd a = jtj;
