@@ -551,10 +551,14 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
   // refinement little of its axis, which it traded against h and the curvatures: in that model
   // 44 ghost-frames lay more than 5 px off the axis, up to 147 px (track 30, 6.8–13.2°: the fits'
   // My 211–217 px, the model's 206–286; test BuildFlareModel.RefinedInImageAVeilKeepsTheAxisItsFitsFound);
-  // held, none, at most 4.4 px. Means over λ × 0.98–1.02 on the 640×427 captures (recall % /
+  // held: none, at most 4.4 px. Means over λ × 0.98–1.02 on the 640×427 captures (recall % /
   // precision % / median PSNR dB / median centroid error px, bench/fit_accuracy.sh), free → held:
   // Heliar 75.3 / 82.1 / 25.0 / 7.3 → 74.9 / 81.6 / 25.1 / 6.9, Tessar 77.8 / 60.0 / 25.2 / 11.6 →
   // 78.3 / 60.4 / 25.2 / 11.3: within the spread over λ, but each ghost drawn about its axis.
+  // h still runs away there (track 30 at 12.8°: 1910 px against the fits' 294, and the model draws
+  // no edge where the disc's is); held within the range of the track's fits ± 50 % as well, λ × 1
+  // gave Heliar 77.5 / 80.4 / 25.6 / 7.0 → 78.2 / 82.4 / 25.2 / 7.7 and Tessar 78.3 / 55.2 /
+  // 25.3 / 12.0 → 75.5 / 53.3 / 25.2 / 12.2, so h is left free.
   held[model::param::kMy] = true;
   constexpr int kMaxIterations = 10;
   for (int it = 0, rejected = 0; it < kMaxIterations && rejected < 8;) {
