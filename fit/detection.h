@@ -42,7 +42,11 @@ struct DetectionOptions {
   // noise σ above the frame's median, times zone_margin (≥ 1). Blobs inside are ignored.
   double light_zone_sigma = 50;
   double zone_margin = 1.15;
-  // At most this many new ghosts per frame (≥ 1).
+  // At most this many new ghosts per frame (≥ 1). At 2, over λ × 0.98–1.02 on the 640×427
+  // captures (recall % / precision % / median PSNR dB / median centroid error px of the model,
+  // bench/fit_accuracy.sh), fewer pieces of ghosts were seeded (fit/evaluation.h Unmatched), but
+  // the Heliar lost ghosts: 74.9 / 81.6 / 25.1 / 6.9 → 69.0 / 89.9 / 23.8 / 6.2; Tessar
+  // 78.3 / 60.4 / 25.2 / 11.3 → 78.1 / 63.1 / 25.5 / 11.7.
   int max_new_per_frame = 4;
   // Separate the light's own image by its point symmetry (estimateLightImage) instead of keeping
   // out of the whole light zone: detection then keeps out of the clipped core only (its radius ×
