@@ -136,7 +136,7 @@ struct PlotPanel {
 cv::Mat evaluationPlot(const Evaluation& ev) {
   const cv::Scalar white(255, 255, 255), ink(60, 60, 60), fit_colour(180, 90, 20),
       ceiling_colour(0, 130, 255), visible_colour(185, 185, 185), found_colour(60, 160, 50),
-      unmatched_colour(50, 50, 210);
+      unmatched_colour(50, 50, 210), pieces_colour(160, 60, 160);
   cv::Mat image(600, 960, CV_8UC3, white);
   if (ev.frames.empty()) return image;
   double a0 = std::numeric_limits<double>::infinity(), a1 = -a0, p0 = a0, p1 = -a0;
@@ -173,7 +173,7 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
   bottom.drawAxes(
       image,
       ev.has_truth
-          ? "true ghosts visible (grey) and found (green); model ghosts matched to none (red)"
+          ? "true ghosts visible (grey) and found (green); model ghosts matched to none (red; purple: pieces of a true ghost)"
           : "model ghosts",
       true);
   cv::putText(image, "angle, deg", {bottom.area.x + bottom.area.width - 80, 596},
@@ -192,6 +192,7 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
       bar(f.angle_deg, 0, f.true_ghosts_visible, visible_colour);
       bar(f.angle_deg, 0, f.true_ghosts_found, found_colour);
       bar(f.angle_deg, 0, -(f.model_ghosts - f.model_ghosts_matched), unmatched_colour);
+      bar(f.angle_deg, 0, -f.model_ghosts_pieces, pieces_colour);
     } else {
       bar(f.angle_deg, 0, f.model_ghosts, visible_colour);
     }

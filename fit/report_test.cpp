@@ -44,7 +44,7 @@ TEST(EvaluationPlot, DrawsEachFramesPsnrAtItsHeightAndTheCeilingWhereGiven) {
     ev.frames.push_back(f);
   }
   const cv::Vec3b curve(180, 90, 20), ceiling(0, 130, 255), found(60, 160, 50),
-      unmatched(50, 50, 210);
+      unmatched(50, 50, 210), pieces(160, 60, 160);
   const cv::Mat plot = evaluationPlot(ev);
   ASSERT_EQ(plot.type(), CV_8UC3);
   // The plot spans the angles: the frames at 0°, 10° and 20° sit at its left end, middle and right
@@ -65,7 +65,20 @@ TEST(EvaluationPlot, DrawsEachFramesPsnrAtItsHeightAndTheCeilingWhereGiven) {
   // Below: each frame's found ghost above the axis, its unmatched model ghost below; no ceiling.
   EXPECT_EQ(rowsOfColour(plot, middle, found).empty(), false);
   EXPECT_EQ(rowsOfColour(plot, middle, unmatched).empty(), false);
+  EXPECT_EQ(rowsOfColour(plot, middle, pieces).empty(), true);
   EXPECT_EQ(columnsOfColour(plot, 40, 340, ceiling), 0);
+  // An unmatched model ghost that is a piece of a true ghost is drawn apart from one that is not.
+  ev.frames[1].model_ghosts = 3;
+  ev.frames[1].model_ghosts_pieces = 1;
+  const cv::Mat with_pieces = evaluationPlot(ev);
+  const std::vector<int> piece_rows = rowsOfColour(with_pieces, middle, pieces);
+  const std::vector<int> other_rows = rowsOfColour(with_pieces, middle, unmatched);
+  ASSERT_FALSE(piece_rows.empty());
+  ASSERT_FALSE(other_rows.empty());
+  EXPECT_LT(piece_rows.back(), other_rows.front());  // the pieces next to the axis, the rest below
+  EXPECT_TRUE(rowsOfColour(with_pieces, left + 1, pieces).empty());
+  ev.frames[1].model_ghosts = 2;
+  ev.frames[1].model_ghosts_pieces = 0;
 
   // With the ceiling measured at 10°: its marker in that frame's column, above the frame's point.
   ev.frames[1].ceiling_psnr_db = 40;
