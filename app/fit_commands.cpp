@@ -229,7 +229,7 @@ void registerFitCeiling(CLI::App& app) {
   struct Options {
     StackArgs stack;
     int every = 10, threads = 2;
-    double edge_weight = -1;
+    double edge_weight = -1, fit_above = 0;
     bool json = false;
     std::string sheets;
   };
@@ -240,6 +240,10 @@ void registerFitCeiling(CLI::App& app) {
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder with ground truth (truth/)")->required();
   cmd->add_option("--every", o->every, "Measure every Nth frame (default 10)");
   cmd->add_option("--edge-weight", o->edge_weight, "λ of the first stage of each fit (default 1, as fit)");
+  cmd->add_option("--fit-above", o->fit_above,
+                  "Fit only the true ghosts whose peak exceeds this many noise σ, the rest drawn as one flat "
+                  "pedestal (the fitter's glare): what a fitter that finds every ghost above that level could "
+                  "reach (default 0: every ghost)");
   cmd->add_option("--sheets", o->sheets,
                   "Folder for one picture per measured frame: noise-free flare | ceiling | |flare − ceiling|");
   cmd->add_flag("--json", o->json, "Print one JSON object");
@@ -250,6 +254,8 @@ void registerFitCeiling(CLI::App& app) {
     if (o->every < 1) throw InputError("--every: expected a number ≥ 1, got " + std::to_string(o->every));
     options.frame_step = o->every;
     if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
+    if (!(o->fit_above >= 0)) throw InputError("--fit-above: expected a number of noise σ ≥ 0");
+    options.fit_factor = o->fit_above;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::max(1, o->threads));

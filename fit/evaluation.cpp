@@ -652,7 +652,15 @@ CeilingFrame ceilingOfFrame(const Frame& f, const CeilingOptions& options) {
     if (!fitted.empty()) described += fitted;
     cf.ghosts.push_back(std::move(cg));
   }
-  cf.psnr_db = psnr(described, truth.flare, (truth.flare > truth.noise_sigma) & (f.valid > 0));
+  const cv::Mat flare_region = (truth.flare > truth.noise_sigma) & (f.valid > 0);
+  // The ghosts left out sum to a pedestal, which the fitter draws as its flat glare (fit/cost.h
+  // isGlare): drawn here as the constant that comes closest to what they leave, in least squares
+  // over the flare region, their mean there.
+  if (options.fit_factor > 0 && cv::countNonZero(flare_region) > 0) {
+    cf.pedestal = std::max(0.0, cv::mean(truth.flare - described, flare_region)[0]);
+    described += cf.pedestal;
+  }
+  cf.psnr_db = psnr(described, truth.flare, flare_region);
   cf.flare = truth.flare;
   cf.described = described;
   return cf;
@@ -671,6 +679,7 @@ ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& 
   });
   ModelCeiling c;
   c.image_size = stack.size;
+  c.fit_above_sigma = options.fit_factor;
   std::vector<double> psnrs, errors;
   std::map<int, std::vector<const CeilingGhost*>> by_id;
   for (auto& cf : measured) {
@@ -717,6 +726,7 @@ nlohmann::json ModelCeiling::toJson() const {
   j["median_centroid_error_px"] = number(median_centroid_error_px);
   j["visible_ghosts"] = visible_ghosts;
   j["within_half_px"] = within_half_px;
+  j["fit_above_sigma"] = fit_above_sigma;
   nlohmann::json fs = nlohmann::json::array();
   for (const auto& f : frames) {
     nlohmann::json gs = nlohmann::json::array();
@@ -732,7 +742,11 @@ nlohmann::json ModelCeiling::toJson() const {
                     {"centroid_error_px", g.centroid_error_px},
                     {"parameters", parameters}});
     }
-    fs.push_back({{"angle_deg", f.angle_deg}, {"noise_sigma", f.noise_sigma}, {"psnr_db", number(f.psnr_db)}, {"ghosts", gs}});
+    fs.push_back({{"angle_deg", f.angle_deg},
+                  {"noise_sigma", f.noise_sigma},
+                  {"psnr_db", number(f.psnr_db)},
+                  {"pedestal", f.pedestal},
+                  {"ghosts", gs}});
   }
   j["frames"] = fs;
   nlohmann::json ghosts = nlohmann::json::array();
@@ -749,8 +763,10 @@ nlohmann::json ModelCeiling::toJson() const {
 std::string ModelCeiling::BriefReport() const {
   std::ostringstream s;
   s.precision(3);
-  s << "Model ceiling over " << frames.size() << " frame(s), each true ghost fitted alone to its noise-free layer: "
-    << "median PSNR vs noise-free flare " << median_psnr_db << " dB; median centroid error "
+  s << "Model ceiling over " << frames.size() << " frame(s), each true ghost ";
+  if (fit_above_sigma > 0) s << "brighter than " << fit_above_sigma << " σ ";
+  s << "fitted alone to its noise-free layer" << (fit_above_sigma > 0 ? ", the fainter ones as a flat pedestal" : "")
+    << ": median PSNR vs noise-free flare " << median_psnr_db << " dB; median centroid error "
     << median_centroid_error_px << " px over " << visible_ghosts << " visible ghosts, " << within_half_px
     << " within 0.5 px.";
   // The ghosts the model describes worst (lowest PSNR against their own layers), up to three.

@@ -181,9 +181,16 @@ Evaluation evaluateFrameFits(const FrameFits& fits, const FrameStack& stack,
 // inner edges a smooth fall-off cannot follow. 7.5 min each on 2 cores.
 struct CeilingOptions {
   int frame_step = 10;          // measure frames 0, N, 2N, … of the stack (≥ 1)
-  // Fit each true ghost whose peak exceeds this × σ; fainter ones count as 0 (≥ 0; 0: every
-  // ghost with any light). Not 1: ghosts each below the noise sum to much of the flare where the
-  // light has left the frame (Heliar 640×427 at 12–21°: left out, the ceiling falls to 17.5 dB).
+  // Fit each true ghost whose peak exceeds this × σ (≥ 0; 0: every ghost with any light, the
+  // model's ceiling). Above 0, the fainter ones are drawn as the flat pedestal closest to their
+  // sum (CeilingFrame::pedestal), as the fitter draws them with its glare (fit/cost.h isGlare):
+  // what a fitter that found and described every ghost above that level could reach, whose
+  // detection stops at 6 σ (fit/detection.h levels_sigma). Ghosts each below the noise sum to
+  // much of the flare once the light has left the frame. Measured (`flarekit fit-ceiling CAPTURE
+  // --fit-above N`, every 10th frame of the 640×427 0–30° captures), median PSNR for 0 / 2 / 4 /
+  // 6 / 10 σ: Heliar 39.0 / 37.1 / 33.3 / 33.1 / 29.2 dB, Tessar 38.5 / 36.8 / 33.6 / 30.0 /
+  // 29.3 dB (at 12–22°, 6 σ: Heliar 23.7–28.9, Tessar 22.3–28.5 dB). Without the pedestal, 6 σ
+  // gave 15.8 and 13.5 dB: a fit's PSNR is mostly the pedestal of the ghosts it cannot see.
   double fit_factor = 0;
   double visible_factor = 10;   // centroid errors over ghosts above this × σ, fit-eval's rule (> 0)
   int max_iterations = 100;     // Levenberg–Marquardt iterations per start and stage (≥ 1)
@@ -214,6 +221,7 @@ struct CeilingFrame {
   double angle_deg = 0;
   double noise_sigma = 0;
   double psnr_db = 0;             // the sum of the best fits against the noise-free flare
+  double pedestal = 0;            // with fit_factor > 0: the flat pedestal drawn for the rest
   std::vector<CeilingGhost> ghosts;  // every fitted true ghost
   cv::Mat flare;                  // the noise-free flare, luminance (CV_32F)
   cv::Mat described;              // the sum of the best fits, luminance (CV_32F)
@@ -236,6 +244,7 @@ struct ModelCeiling {
   double median_centroid_error_px = 0;      // over visible ghosts in every frame
   int visible_ghosts = 0;                   // (frame, ghost) pairs
   int within_half_px = 0;                   // of them, centroid error ≤ 0.5 px
+  double fit_above_sigma = 0;               // CeilingOptions::fit_factor: fainter ghosts count as 0
 
   nlohmann::json toJson() const;
   std::string BriefReport() const;

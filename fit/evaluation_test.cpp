@@ -312,6 +312,39 @@ TEST(ModelCeiling, ReachesAGhostOfTheModelsShapeAndNamesOneItCannotDescribe) {
   EXPECT_EQ(measureModelCeiling(two, every_other).frames.size(), 1u);
 }
 
+// Above a level, only the brighter ghosts are fitted and the fainter ones drawn as one flat
+// pedestal, as the fitter's glare draws them: here a layer flat over the frame, 10 σ, under a
+// ghost of the model's shape, 200 σ.
+TEST(ModelCeiling, AboveALevelTheFainterGhostsAreDrawnAsAPedestal) {
+  TempDir dir;
+  const cv::Mat own = render(testing::ghost(60, 65, 25, 30, 22, 2e-3, 1e-3));
+  const cv::Mat faint(kSize, CV_32F, cv::Scalar(1e-4));
+  cv::Mat noise(kSize, CV_32F);
+  cv::RNG(5).fill(noise, cv::RNG::NORMAL, 0, 1e-5);
+  const FrameStack stack = stackOf(dir, own + faint + noise, own + faint, std::vector<cv::Mat>{own, faint});
+  CeilingOptions above;
+  above.fit_factor = 20;
+  const ModelCeiling c = measureModelCeiling(stack, above);
+  ASSERT_EQ(c.frames.size(), 1u);
+  const CeilingFrame& f = c.frames[0];
+  ASSERT_EQ(f.ghosts.size(), 1u);
+  EXPECT_EQ(f.ghosts[0].id, 0);
+  EXPECT_NEAR(f.pedestal, 1e-4, 1e-5);
+  EXPECT_EQ(c.fit_above_sigma, 20);
+  // Without the pedestal the frame would be 1e-4 short everywhere.
+  const cv::Mat region = f.flare > f.noise_sigma;
+  double peak = 0;
+  cv::minMaxLoc(f.flare, nullptr, &peak, nullptr, nullptr, region);
+  const cv::Mat short_by = f.described - f.pedestal - f.flare;
+  const double without = 10 * std::log10(peak * peak / cv::mean(short_by.mul(short_by), region)[0]);
+  EXPECT_GT(f.psnr_db, without + 5) << without;
+  EXPECT_NE(c.BriefReport().find("brighter than 20 σ"), std::string::npos) << c.BriefReport();
+  // At 0, every ghost is fitted and no pedestal drawn.
+  const ModelCeiling every = measureModelCeiling(stack);
+  EXPECT_EQ(every.frames[0].ghosts.size(), 2u);
+  EXPECT_EQ(every.frames[0].pedestal, 0);
+}
+
 TEST(ModelCeiling, NeedsGroundTruth) {
   FrameStack stack;
   stack.size = kSize;

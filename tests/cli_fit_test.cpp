@@ -294,6 +294,25 @@ TEST(CliFit, CeilingOfACaptureOfModelShapedGhosts) {
   r = runFlarekit({"fit-ceiling", (dir / "capture").string(), "--every", "0"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("--every"), std::string::npos) << r.err;
+  // --fit-above: only the ghosts brighter than that many σ are described, the rest as a flat
+  // pedestal. Above every ghost's peak, none is: the ceiling is the flare's mean, far below the
+  // ceiling of every ghost, and the file says so.
+  r = runFlarekit({"-q", "fit-ceiling", (dir / "capture").string(), "--every", "2", "--json", "--fit-above", "1e9"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto none = nlohmann::json::parse(r.out);
+  EXPECT_EQ(none["fit_above_sigma"].get<double>(), 1e9);
+  EXPECT_EQ(none["visible_ghosts"].get<int>(), 0);
+  EXPECT_LT(none["median_psnr_db"].get<double>(), j["median_psnr_db"].get<double>() - 20) << r.out;
+  for (const auto& f : none["frames"]) {
+    EXPECT_TRUE(f["ghosts"].empty());
+    EXPECT_GT(f["pedestal"].get<double>(), 0);
+  }
+  EXPECT_EQ(j["fit_above_sigma"].get<double>(), 0);
+  EXPECT_EQ(j["frames"][0]["pedestal"].get<double>(), 0);
+  r = runFlarekit({"fit-ceiling", (dir / "capture").string(), "--fit-above", "-1"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(lineCount(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("--fit-above"), std::string::npos) << r.err;
 }
 
 TEST(CliFit, BadInputGivesOneLineAndExitTwo) {
