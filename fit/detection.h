@@ -30,6 +30,15 @@ struct DetectionOptions {
   // (recall / precision / median PSNR / median centroid error), this level set → with 10σ:
   //   Heliar Tronnier: 71.2 / 86.5 % / 24.0 dB / 8.8 px → 70.6 / 85.7 / 24.0 / 7.9;
   //   Brendel Tessar:  51.4 / 78.0 / 22.5 / 15.6 → 54.3 / 80.0 / 21.1 / 19.4.
+  // A level below 6σ, for the faint veils the PSNR needs (fit/evaluation.h
+  // CeilingOptions::fit_factor: the Tessar's ceiling is 30.0 dB above 6σ, 33.6 above 4σ), gained
+  // within the spread over λ and cost time. Means over λ × 0.98–1.02 (bench/fit_accuracy.sh),
+  // this level set → with 3σ → with 4σ:
+  //   Heliar: 74.9 / 81.6 / 25.1 / 6.9 → 78.2 / 82.0 / 25.1 / 6.2 → 80.3 / 78.7 / 23.9 / 6.0;
+  //   Tessar: 78.3 / 60.4 / 25.2 / 11.3 → 79.0 / 60.0 / 26.3 / 10.7 → 78.1 / 58.7 / 25.7 / 12.4.
+  // With 3σ the fits took 52–72 s, beyond the 60 s a capture may take (λ × 1, each run alone:
+  // Heliar 55.8 s against 37.5, Tessar 64.5 against 55.6; 157 candidates at 3σ on the Tessar, 38
+  // kept); without its blobs under 1000 px, the Tessar still took 66.8 s.
   std::vector<double> levels_sigma = {1000, 100, 20, 6};
   // Smallest blob, pixels (≥ 1).
   int min_area_px = 30;
