@@ -81,7 +81,9 @@ void registerFit(CLI::App& app) {
       ->required();
   cmd->add_option("--out", o->out, "Model file to write (model.json)")->required();
   cmd->add_option("--optimizer", o->optimizer, "ceres (Levenberg–Marquardt, default) or walch-gd (the paper's gradient descent)");
-  cmd->add_option("--degree", o->degree, "Polynomial degree per parameter, or auto (1–4 by held-out error); default 2");
+  cmd->add_option("--degree", o->degree,
+                  "Polynomial degree per parameter, or auto (1–4 by held-out error); default 2 (the glare, "
+                  "which spans the capture, at least 4)");
   cmd->add_option("--holdout", o->holdout, "odd: fit on every other frame only (evaluate the others with fit-eval --frames odd)");
   cmd->add_option("--report", o->report, "Folder for per-ghost tracks, residuals, contact sheets and the frames' own fits (frame_fits.json)");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");

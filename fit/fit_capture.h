@@ -190,10 +190,14 @@ model::Polynomial fitPolynomial(const std::vector<double>& angles_deg,
 std::vector<bool> polynomialInliers(const std::vector<double>& angles_deg,
                                     const std::vector<double>& values, int degree);
 
+// The least degree of a glare's polynomials (fit/cost.h isGlare): its one track spans the
+// capture, and its pedestal falls 20× over 0–30° on the 640×427 captures (buildFlareModel).
+inline constexpr int kGlareDegree = 4;
+
 // The flare model from the tracks: one GhostTrack per track, each parameter a polynomial of the
-// given degree (or auto 1–4 by held-out error when degree < 0) through the track's fits but its
-// spikes (polynomialInliers). Degrees are lowered where a polynomial would leave the parameter's
-// bounds inside the range. Each ghost's angle range reaches
+// given degree (or auto 1–4 by held-out error when degree < 0; a glare's at least kGlareDegree)
+// through the track's fits but its spikes (polynomialInliers). Degrees are lowered where a
+// polynomial would leave the parameter's bounds inside the range. Each ghost's angle range reaches
 // `range_margin_deg` beyond its first and last fitted angle, within [capture_min_deg,
 // capture_max_deg]: a ghost fitted in one frame and not in the next ends somewhere between them,
 // and the fitter passes half the spacing of its frames, so that the model has no gaps between

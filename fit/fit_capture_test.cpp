@@ -128,6 +128,39 @@ TEST(BuildFlareModel, PolynomialsStayWithinBoundsAndAutoDegreeIsLowForLinearData
   EXPECT_LE(automatic.ghosts[0].parameters[model::param::kMx].coefficients.size(), 2u);
 }
 
+TEST(BuildFlareModel, AGlareFollowsItsPedestalOverTheCapture) {
+  // Veiling glare flat over the frame (fit/cost.h isGlare), fitted in every frame of a 0–30°
+  // capture, its pedestal falling 20× as the light leaves (as on the 640×427 captures). The
+  // model must draw each frame's pedestal within 10 % of its fit's, to the last frame.
+  GhostTrackFit t;
+  t.id = 0;
+  const model::CaptureInfo info = testCapture(0.5);
+  for (int i = 0; i <= 60; ++i) {
+    model::GhostParameters g;
+    g.center_x = 100;
+    g.center_y = 60;
+    g.left = g.right = g.height = 640;
+    g.inside_falloff = 50;
+    g.outside_falloff = 120;
+    g.border = {1e-4, 0, 0};
+    g.inside = {1e-4 * std::exp(-0.5 * i / 10), 0, 0};
+    ASSERT_TRUE(isGlare(g, info.image_size));
+    addFrame(t, 0.5 * i, g);
+  }
+  const model::FlareModel m = buildFlareModel({t}, info, 1, 2);
+  std::string error;
+  ASSERT_TRUE(m.IsValid(&error)) << error;
+  auto pedestal = [&](const model::GhostParameters& g) {
+    return cv::mean(model::renderGhosts(std::span(&g, 1), info.image_size, 1))[0];
+  };
+  for (size_t i = 0; i < t.fits.size(); ++i) {
+    const auto at = m.ghostsAt(t.angles_deg[i]);
+    ASSERT_EQ(at.size(), 1u);
+    const double fit = pedestal(t.fits[i]);
+    EXPECT_NEAR(pedestal(at[0].parameters), fit, 0.1 * fit) << "at " << t.angles_deg[i] << "°";
+  }
+}
+
 TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
   // A ghost whose fits trade border brightness against outer fall-off from frame to frame (a
   // compact bright border in even frames, a faint wide glow in odd ones): polynomials of Ib, Fo
