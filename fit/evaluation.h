@@ -184,13 +184,14 @@ struct CeilingOptions {
   // Fit each true ghost whose peak exceeds this × σ (≥ 0; 0: every ghost with any light, the
   // model's ceiling). Above 0, the fainter ones are drawn as the flat pedestal closest to their
   // sum (CeilingFrame::pedestal), as the fitter draws them with its glare (fit/cost.h isGlare):
-  // what a fitter that found and described every ghost above that level could reach, whose
-  // detection stops at 6 σ (fit/detection.h levels_sigma). Ghosts each below the noise sum to
-  // much of the flare once the light has left the frame. Measured (`flarekit fit-ceiling CAPTURE
-  // --fit-above N`, every 10th frame of the 640×427 0–30° captures), median PSNR for 0 / 2 / 4 /
-  // 6 / 10 σ: Heliar 39.0 / 37.1 / 33.3 / 33.1 / 29.2 dB, Tessar 38.5 / 36.8 / 33.6 / 30.0 /
+  // what a fitter that found and described every ghost above that level could reach (the
+  // fitter's detection stops at 6 σ, fit/detection.h levels_sigma). Ghosts each below the noise
+  // sum to much of the flare once the light has left the frame. Measured (`flarekit fit-ceiling
+  // CAPTURE --fit-above N`, every 10th frame of the 640×427 0–30° captures), median PSNR for 0 /
+  // 2 / 4 / 6 / 10 σ: Heliar 39.0 / 37.1 / 33.3 / 33.1 / 29.2 dB, Tessar 38.5 / 36.8 / 33.6 / 30.0 /
   // 29.3 dB (at 12–22°, 6 σ: Heliar 23.7–28.9, Tessar 22.3–28.5 dB). Without the pedestal, 6 σ
-  // gave 15.8 and 13.5 dB: a fit's PSNR is mostly the pedestal of the ghosts it cannot see.
+  // gave 15.8 and 13.5 dB: the PSNR a fit reaches rests on its glare drawing the ghosts it
+  // cannot see.
   double fit_factor = 0;
   double visible_factor = 10;   // centroid errors over ghosts above this × σ, fit-eval's rule (> 0)
   int max_iterations = 100;     // Levenberg–Marquardt iterations per start and stage (≥ 1)
@@ -244,7 +245,7 @@ struct ModelCeiling {
   double median_centroid_error_px = 0;      // over visible ghosts in every frame
   int visible_ghosts = 0;                   // (frame, ghost) pairs
   int within_half_px = 0;                   // of them, centroid error ≤ 0.5 px
-  double fit_above_sigma = 0;               // CeilingOptions::fit_factor: fainter ghosts count as 0
+  double fit_above_sigma = 0;               // CeilingOptions::fit_factor (fainter ghosts: a pedestal)
 
   nlohmann::json toJson() const;
   std::string BriefReport() const;
