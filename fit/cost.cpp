@@ -168,7 +168,14 @@ model::ParameterBounds modelBoundsWithin(int index, int channels, double lo, dou
 // the glare is Ii over the whole frame. Up to W + H = 4000 px, a = 2 (W + H), f = 1/2 (the centre
 // anywhere in the frame) and Fi's limit is (W + H) / 2; beyond, f shrinks to 0.01, and the
 // guarantee holds while n < 1 (W + H below 15 686 px). Fo stays above isGlare's limit. Nothing
-// for the other parameters.
+// for the other parameters. The faint ghosts' sum the glare stands for is not flat (a pedestal
+// quadratic along the flare axis lifts fit-ceiling --fit-above 6 from 33.1 / 30.0 to 36.9 /
+// 35.5 dB, Heliar / Tessar, fit/evaluation.h CeilingOptions::fit_factor), but a glare whose
+// inside fall-off reaches the frame (Fi up to 3 (W + H), seeded at 2.2 (W + H) with Ib = Ii, so
+// that Ib, Ei and the centre shape it) did worse at λ × 1 (640×427 captures; recall % /
+// precision % / median PSNR dB / median centroid error px of the model): Heliar 77.5 / 80.4 /
+// 25.6 / 7.6 → 74.7 / 80.4 / 24.1 / 6.5, Tessar 74.7 / 53.4 / 25.9 / 10.4 → 63.5 / 59.2 / 25.1 /
+// 11.8, and took 92–94 s instead of 39–63.
 std::optional<model::ParameterBounds> glareBounds(int index, int channels, cv::Size size) {
   using namespace model::param;
   const model::ParameterLayout layout{channels};
