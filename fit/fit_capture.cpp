@@ -560,6 +560,8 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
   // gave Heliar 77.5 / 80.4 / 25.6 / 7.0 → 78.2 / 82.4 / 25.2 / 7.7 and Tessar 78.3 / 55.2 /
   // 25.3 / 12.0 → 75.5 / 53.3 / 25.2 / 12.2, so h is left free.
   held[model::param::kMy] = true;
+  // At 25 iterations, λ × 1 on the 640×427 captures: the models' median PSNR the same to 0.1 dB
+  // (Heliar 25.6 → 25.5, Tessar 25.9 → 26.0), and the Tessar's fit took 72.6 s against 57.6–62.9.
   constexpr int kMaxIterations = 10;
   for (int it = 0, rejected = 0; it < kMaxIterations && rejected < 8;) {
     Eigen::MatrixXd a = jtj;
