@@ -232,7 +232,7 @@ void registerFitCeiling(CLI::App& app) {
     StackArgs stack;
     int every = 10, threads = 2;
     double edge_weight = -1, fit_above = 0;
-    bool json = false;
+    bool json = false, quadratic_pedestal = false;
     std::string sheets;
   };
   auto o = std::make_shared<Options>();
@@ -246,6 +246,8 @@ void registerFitCeiling(CLI::App& app) {
                   "Fit only the true ghosts whose peak exceeds this many noise σ, the rest drawn as one flat "
                   "pedestal (the fitter's glare): what a fitter that finds every ghost above that level could "
                   "reach (default 0: every ghost)");
+  cmd->add_flag("--quadratic-pedestal", o->quadratic_pedestal,
+                "With --fit-above: the pedestal a quadratic in x and y over the frame instead of flat");
   cmd->add_option("--sheets", o->sheets,
                   "Folder for one picture per measured frame: noise-free flare | ceiling | |flare − ceiling|");
   cmd->add_flag("--json", o->json, "Print one JSON object");
@@ -258,6 +260,9 @@ void registerFitCeiling(CLI::App& app) {
     if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
     if (!(o->fit_above >= 0)) throw InputError("--fit-above: expected a number of noise σ ≥ 0");
     options.fit_factor = o->fit_above;
+    if (o->quadratic_pedestal && !(o->fit_above > 0))
+      throw InputError("--quadratic-pedestal: needs --fit-above above 0 (below it no ghost is drawn as a pedestal)");
+    options.quadratic_pedestal = o->quadratic_pedestal;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::max(1, o->threads));

@@ -635,6 +635,42 @@ CeilingGhost fitTrueGhost(const GhostTruth& truth, const cv::Mat& lum, const Blo
   return best;
 }
 
+// The quadratic in the pixel's x and y (1, x, y, x², xy, y²) closest to `rest` in least squares
+// over `region`, drawn over the frame and clamped at 0 (light is not negative).
+cv::Mat quadraticPedestal(const cv::Mat& rest, const cv::Mat& region) {
+  const int W = rest.cols, H = rest.rows;
+  auto terms = [&](int x, int y, double* t) {
+    // Centred and scaled by the width, for conditioning.
+    const double u = (x + 0.5 - 0.5 * W) / W, v = (y + 0.5 - 0.5 * H) / W;
+    t[0] = 1, t[1] = u, t[2] = v, t[3] = u * u, t[4] = u * v, t[5] = v * v;
+  };
+  constexpr int kTerms = 6;
+  cv::Matx<double, kTerms, kTerms> normal = cv::Matx<double, kTerms, kTerms>::zeros();
+  cv::Vec<double, kTerms> right = cv::Vec<double, kTerms>::all(0);
+  double t[kTerms];
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (!region.at<uchar>(y, x)) continue;
+      terms(x, y, t);
+      const double r = rest.at<float>(y, x);
+      for (int i = 0; i < kTerms; ++i) {
+        right[i] += t[i] * r;
+        for (int j = 0; j < kTerms; ++j) normal(i, j) += t[i] * t[j];
+      }
+    }
+  cv::Vec<double, kTerms> c;
+  cv::solve(normal, right, c, cv::DECOMP_SVD);
+  cv::Mat pedestal(rest.size(), CV_32F);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      terms(x, y, t);
+      double value = 0;
+      for (int i = 0; i < kTerms; ++i) value += c[i] * t[i];
+      pedestal.at<float>(y, x) = static_cast<float>(std::max(0.0, value));
+    }
+  return pedestal;
+}
+
 CeilingFrame ceilingOfFrame(const Frame& f, const CeilingOptions& options) {
   const FrameTruth truth = readFrameTruth(f, luminance(f.image));
   CeilingFrame cf;
@@ -657,8 +693,15 @@ CeilingFrame ceilingOfFrame(const Frame& f, const CeilingOptions& options) {
   // isGlare): drawn here as the constant that comes closest to what they leave, in least squares
   // over the flare region, their mean there.
   if (options.fit_factor > 0 && cv::countNonZero(flare_region) > 0) {
-    cf.pedestal = std::max(0.0, cv::mean(truth.flare - described, flare_region)[0]);
-    described += cf.pedestal;
+    const cv::Mat rest = truth.flare - described;
+    if (options.quadratic_pedestal) {
+      const cv::Mat pedestal = quadraticPedestal(rest, flare_region);
+      cf.pedestal = cv::mean(pedestal, flare_region)[0];
+      described += pedestal;
+    } else {
+      cf.pedestal = std::max(0.0, cv::mean(rest, flare_region)[0]);
+      described += cf.pedestal;
+    }
   }
   cf.psnr_db = psnr(described, truth.flare, flare_region);
   cf.flare = truth.flare;
@@ -680,6 +723,7 @@ ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& 
   ModelCeiling c;
   c.image_size = stack.size;
   c.fit_above_sigma = options.fit_factor;
+  c.quadratic_pedestal = options.quadratic_pedestal;
   std::vector<double> psnrs, errors;
   std::map<int, std::vector<const CeilingGhost*>> by_id;
   for (auto& cf : measured) {
@@ -727,6 +771,7 @@ nlohmann::json ModelCeiling::toJson() const {
   j["visible_ghosts"] = visible_ghosts;
   j["within_half_px"] = within_half_px;
   j["fit_above_sigma"] = fit_above_sigma;
+  j["pedestal"] = fit_above_sigma > 0 ? (quadratic_pedestal ? "quadratic" : "flat") : "none";
   nlohmann::json fs = nlohmann::json::array();
   for (const auto& f : frames) {
     nlohmann::json gs = nlohmann::json::array();
@@ -765,8 +810,10 @@ std::string ModelCeiling::BriefReport() const {
   s.precision(3);
   s << "Model ceiling over " << frames.size() << " frame(s), each true ghost ";
   if (fit_above_sigma > 0) s << "brighter than " << fit_above_sigma << " σ ";
-  s << "fitted alone to its noise-free layer" << (fit_above_sigma > 0 ? ", the fainter ones as a flat pedestal" : "")
-    << ": median PSNR vs noise-free flare " << median_psnr_db << " dB; median centroid error "
+  s << "fitted alone to its noise-free layer";
+  if (fit_above_sigma > 0)
+    s << ", the fainter ones as a " << (quadratic_pedestal ? "quadratic" : "flat") << " pedestal";
+  s << ": median PSNR vs noise-free flare " << median_psnr_db << " dB; median centroid error "
     << median_centroid_error_px << " px over " << visible_ghosts << " visible ghosts, " << within_half_px
     << " within 0.5 px.";
   // The ghosts the model describes worst (lowest PSNR against their own layers), up to three.

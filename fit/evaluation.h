@@ -188,14 +188,18 @@ struct CeilingOptions {
   // fitter's detection stops at 6 σ, fit/detection.h levels_sigma). Ghosts each below the noise
   // sum to much of the flare once the light has left the frame. Measured (`flarekit fit-ceiling
   // CAPTURE --fit-above N`, every 10th frame of the 640×427 0–30° captures), median PSNR for 0 /
-  // 2 / 4 / 6 / 10 σ: Heliar 39.0 / 37.1 / 33.3 / 33.1 / 29.2 dB, Tessar 38.5 / 36.8 / 33.6 / 30.0 /
-  // 29.3 dB (at 12–22°, 6 σ: Heliar 23.7–28.9, Tessar 22.3–28.5 dB). Without the pedestal, 6 σ
-  // gave 15.8 and 13.5 dB: the PSNR a fit reaches rests on its glare drawing the ghosts it
-  // cannot see. Shaped instead of flat, as a least-squares field in the frame's x along the flare
-  // axis and y across it (measured with a temporary change), 6 σ gave: 1, x: Heliar 35.3, Tessar
-  // 31.9 dB; 1, x, x², y²: 36.9 and 35.5 dB (fit/cost.cpp glareBounds: the fitter's glare so
-  // shaped did not get there).
+  // 2 / 4 / 6 / 10 σ: Heliar 39.0 / 37.1 / 33.3 / 33.1 / 29.2 dB, Tessar 38.5 / 36.8 / 33.6 /
+  // 30.0 / 29.3 dB (at 12–22°, 6 σ: Heliar 23.7–28.9, Tessar 22.3–28.5 dB). Without the pedestal,
+  // 6 σ gave 15.8 and 13.5 dB: the PSNR a fit reaches rests on its glare drawing the ghosts it
+  // cannot see. Shaped instead of flat (quadratic_pedestal, `--quadratic-pedestal`), 6 σ gave
+  // Heliar 36.9 and Tessar 35.5 dB (12–22°: 31.0–36.7 and 27.9–35.0): the faint ghosts' sum is
+  // smooth but not flat. With a temporary change, linear along the flare axis (1, x): 35.3 and
+  // 31.9 dB. The fitter's glare so shaped did not get there (fit/cost.cpp glareBounds).
   double fit_factor = 0;
+  // With fit_factor > 0, the pedestal a quadratic in the pixel's x and y (1, x, y, x², xy, y²),
+  // fitted the same way, instead of a constant: whether a glare shaped over the frame would
+  // draw the faint ghosts' sum (the fitter's is flat).
+  bool quadratic_pedestal = false;
   double visible_factor = 10;   // centroid errors over ghosts above this × σ, fit-eval's rule (> 0)
   int max_iterations = 100;     // Levenberg–Marquardt iterations per start and stage (≥ 1)
   // The fit's cost without its robust loss and shape prior: the truth has no outliers to resist
@@ -225,7 +229,8 @@ struct CeilingFrame {
   double angle_deg = 0;
   double noise_sigma = 0;
   double psnr_db = 0;             // the sum of the best fits against the noise-free flare
-  double pedestal = 0;            // with fit_factor > 0: the flat pedestal drawn for the rest
+  double pedestal = 0;            // with fit_factor > 0: the pedestal drawn for the rest (its
+                                  // mean over the flare region, when quadratic)
   std::vector<CeilingGhost> ghosts;  // every fitted true ghost
   cv::Mat flare;                  // the noise-free flare, luminance (CV_32F)
   cv::Mat described;              // the sum of the best fits, luminance (CV_32F)
@@ -249,6 +254,7 @@ struct ModelCeiling {
   int visible_ghosts = 0;                   // (frame, ghost) pairs
   int within_half_px = 0;                   // of them, centroid error ≤ 0.5 px
   double fit_above_sigma = 0;               // CeilingOptions::fit_factor (fainter ghosts: a pedestal)
+  bool quadratic_pedestal = false;          // CeilingOptions::quadratic_pedestal
 
   nlohmann::json toJson() const;
   std::string BriefReport() const;

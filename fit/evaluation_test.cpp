@@ -345,6 +345,32 @@ TEST(ModelCeiling, AboveALevelTheFainterGhostsAreDrawnAsAPedestal) {
   EXPECT_EQ(every.frames[0].pedestal, 0);
 }
 
+// A faint layer that rises across the frame (as the faint ghosts' sum does along the flare axis):
+// a flat pedestal draws its mean, a quadratic one the layer itself.
+TEST(ModelCeiling, AQuadraticPedestalFollowsWhatAFlatOneCannot) {
+  TempDir dir;
+  const cv::Mat own = render(testing::ghost(60, 65, 25, 30, 22, 2e-3, 1e-3));
+  cv::Mat faint(kSize, CV_32F);
+  for (int y = 0; y < kSize.height; ++y)
+    for (int x = 0; x < kSize.width; ++x) faint.at<float>(y, x) = static_cast<float>(2e-5 + 2e-4 * x / kSize.width);
+  cv::Mat noise(kSize, CV_32F);
+  cv::RNG(7).fill(noise, cv::RNG::NORMAL, 0, 1e-5);
+  const FrameStack stack = stackOf(dir, own + faint + noise, own + faint, std::vector<cv::Mat>{own, faint});
+  CeilingOptions flat;
+  flat.fit_factor = 30;
+  CeilingOptions quadratic = flat;
+  quadratic.quadratic_pedestal = true;
+  const ModelCeiling f = measureModelCeiling(stack, flat), q = measureModelCeiling(stack, quadratic);
+  ASSERT_EQ(q.frames.size(), 1u);
+  ASSERT_EQ(q.frames[0].ghosts.size(), 1u);
+  EXPECT_GT(q.median_psnr_db, f.median_psnr_db + 10) << f.median_psnr_db;
+  // Its mean over the flare region, the whole frame here: the layer's.
+  EXPECT_NEAR(q.frames[0].pedestal, 1.2e-4, 1e-5);
+  EXPECT_EQ(q.toJson()["pedestal"], "quadratic");
+  EXPECT_EQ(f.toJson()["pedestal"], "flat");
+  EXPECT_NE(q.BriefReport().find("quadratic pedestal"), std::string::npos) << q.BriefReport();
+}
+
 TEST(ModelCeiling, NeedsGroundTruth) {
   FrameStack stack;
   stack.size = kSize;

@@ -309,6 +309,10 @@ TEST(CliFit, CeilingOfACaptureOfModelShapedGhosts) {
   }
   EXPECT_EQ(j["fit_above_sigma"].get<double>(), 0);
   EXPECT_EQ(j["frames"][0]["pedestal"].get<double>(), 0);
+  r = runFlarekit({"fit-ceiling", (dir / "capture").string(), "--quadratic-pedestal"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(lineCount(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("--fit-above"), std::string::npos) << r.err;
   r = runFlarekit({"fit-ceiling", (dir / "capture").string(), "--fit-above", "-1"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(lineCount(r.err), 1) << r.err;
