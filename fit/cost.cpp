@@ -168,9 +168,9 @@ model::ParameterBounds modelBoundsWithin(int index, int channels, double lo, dou
 // the glare is Ii over the whole frame. Up to W + H = 4000 px, a = 2 (W + H), f = 1/2 (the centre
 // anywhere in the frame) and Fi's limit is (W + H) / 2; beyond, f shrinks to 0.01, and the
 // guarantee holds while n < 1 (W + H below 15 686 px). Fo stays above isGlare's limit. Nothing
-// for the other parameters. The faint ghosts' sum the glare stands for is not flat (a pedestal
-// quadratic along the flare axis lifts fit-ceiling --fit-above 6 from 33.1 / 30.0 to 36.9 /
-// 35.5 dB, Heliar / Tessar, fit/evaluation.h CeilingOptions::fit_factor), but a glare whose
+// for the other parameters. The faint ghosts' sum the glare stands for is not flat (a quadratic
+// pedestal lifts fit-ceiling --fit-above 6 from 33.1 / 30.0 to 36.9 / 35.5 dB, Heliar / Tessar,
+// --quadratic-pedestal, fit/evaluation.h CeilingOptions::fit_factor), but a glare whose
 // inside fall-off reaches the frame (Fi up to 3 (W + H), seeded at 2.2 (W + H) with Ib = Ii, so
 // that Ib, Ei and the centre shape it) did worse at λ × 1 (640×427 captures; recall % /
 // precision % / median PSNR dB / median centroid error px of the model): Heliar 77.5 / 80.4 /
