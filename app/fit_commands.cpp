@@ -71,7 +71,7 @@ void registerFit(CLI::App& app) {
     std::string out, optimizer = "ceres", degree = "2", holdout, report;
     int threads = 2, joint_sweeps = -1;
     double edge_weight = -1, shape_prior = -1;
-    bool light_symmetry = true, veils = false, glare = true, pixel_noise = true;
+    bool light_symmetry = true, veils = false, glare = true, pedestal = true, pixel_noise = true;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -104,6 +104,10 @@ void registerFit(CLI::App& app) {
                 "a ghost of its own flat over the frame (default), so the ghosts keep sharp "
                 "outlines (fit/cost.h isGlare)");
   cmd->add_flag(
+      "--pedestal,!--no-pedestal", o->pedestal,
+      "Fit each frame's pedestal, the smooth glow the ghosts leave, as a quadratic over the "
+      "frame once the tracks stand (default), and keep it in the model (model/pedestal.h)");
+  cmd->add_flag(
       "--pixel-noise,!--no-pixel-noise", o->pixel_noise,
       "Count thresholds in σ of the frame's pixel noise (default), or in the background's spread "
       "(fewer ghosts found, more of the model's ghosts true; fit/fit_capture.h)");
@@ -131,6 +135,7 @@ void registerFit(CLI::App& app) {
     options.detection.light_symmetry = o->light_symmetry;
     options.detection.find_veils = o->veils;
     options.detection.find_glare = o->glare;
+    options.pedestal = o->pedestal;
     options.pixel_noise = o->pixel_noise;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);

@@ -103,9 +103,17 @@ void registerModelInfo(CLI::App& app) {
       ghosts.push_back(ghostJson(m, g, at));
     }
     const nlohmann::json capture = m.toJson()["capture"];
+    // The pedestal's terms at θ (model/pedestal.h), or null where the model draws none.
+    nlohmann::json pedestal = nullptr;
+    if (const model::Pedestal p = m.pedestalAt(o->angle_deg); !p.empty()) {
+      pedestal = nlohmann::json::object();
+      for (size_t k = 0; k < p.coefficients.size(); ++k)
+        pedestal[model::pedestalTermName(static_cast<int>(k), m.channels)] = p.coefficients[k];
+    }
     if (o->json) {
-      nlohmann::json j = {{"file", o->model}, {"channels", m.channels}, {"capture", capture},
-                          {"angle_deg", o->angle_deg}, {"ghosts", ghosts}};
+      nlohmann::json j = {{"file", o->model},   {"channels", m.channels},
+                          {"capture", capture}, {"angle_deg", o->angle_deg},
+                          {"ghosts", ghosts},   {"pedestal", pedestal}};
       std::cout << j.dump(2) << "\n";
       return;
     }
@@ -129,6 +137,13 @@ void registerModelInfo(CLI::App& app) {
       }
       std::cout << "\n   ";
       for (const auto& name : names) std::cout << " " << name << "=" << g["parameters"][name].get<double>();
+      std::cout << "\n";
+    }
+    if (!pedestal.is_null()) {
+      std::cout << "  pedestal: " << m.pedestal->angle_min_deg << " .. "
+                << m.pedestal->angle_max_deg << " deg\n   ";
+      for (const auto& [name, value] : pedestal.items())
+        std::cout << " " << name << "=" << value.get<double>();
       std::cout << "\n";
     }
   });

@@ -19,6 +19,7 @@
 #include "common/progress.h"
 #include "fit/cost.h"
 #include "fit/group_solver.h"
+#include "fit/pedestal.h"
 
 namespace flarekit::fit {
 
@@ -125,15 +126,18 @@ FrameTruth readFrameTruth(const Frame& f, const cv::Mat& frame_lum) {
 }
 
 // One frame's evaluation (evaluateGhosts).
-FrameEvaluation evaluateFrame(const Frame& f, const std::vector<model::GhostAtAngle>& ghosts, int channels,
+FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int channels,
                               const FrameStack& stack, const EvaluationOptions& options) {
+  const std::vector<model::GhostAtAngle>& ghosts = flare.ghosts;
   const cv::Rect image(0, 0, stack.size.width, stack.size.height);
   FrameEvaluation fe;
   fe.angle_deg = f.angle_deg;
   model::RenderOptions render;
   std::vector<model::GhostParameters> all;
   for (const auto& g : ghosts) all.push_back(g.parameters);
-  const cv::Mat model_lum = luminance(model::renderGhosts(all, stack.size, channels, render));
+  cv::Mat model_image = model::renderGhosts(all, stack.size, channels, render);
+  flare.pedestal.addTo(model_image, stack.size);
+  const cv::Mat model_lum = luminance(model_image);
   const cv::Mat frame_lum = luminance(f.image);
   FrameTruth truth;
   if (stack.has_truth) {
@@ -320,9 +324,9 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
   if (!options.IsValid(&error)) throw std::invalid_argument("EvaluationOptions: " + error);
   auto evaluated = measureFrames<FrameEvaluation>(stack, "fit-eval", [&](size_t i) -> std::optional<FrameEvaluation> {
     if (options.odd_frames_only && i % 2 == 0) return std::nullopt;
-    const auto ghosts = ghosts_at(stack.frames[i].angle_deg);
-    if (!ghosts) return std::nullopt;
-    return evaluateFrame(stack.frames[i], *ghosts, channels, stack, options);
+    const auto flare = ghosts_at(stack.frames[i].angle_deg);
+    if (!flare) return std::nullopt;
+    return evaluateFrame(stack.frames[i], *flare, channels, stack, options);
   });
   Evaluation ev;
   ev.has_truth = stack.has_truth;
@@ -381,16 +385,19 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
 
 Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
                          const EvaluationOptions& options) {
-  return evaluateGhosts([&](double angle_deg) { return std::optional(m.ghostsAt(angle_deg)); }, m.channels,
-                        stack, options);
+  return evaluateGhosts(
+      [&](double angle_deg) {
+        return std::optional(FlareAtAngle{m.ghostsAt(angle_deg), m.pedestalAt(angle_deg)});
+      },
+      m.channels, stack, options);
 }
 
 Evaluation evaluateFrameFits(const FrameFits& fits, const FrameStack& stack, const EvaluationOptions& options) {
   return evaluateGhosts(
-      [&](double angle_deg) -> std::optional<std::vector<model::GhostAtAngle>> {
+      [&](double angle_deg) -> std::optional<FlareAtAngle> {
         const FrameFits::FittedFrame* frame = fits.at(angle_deg);
         if (!frame) return std::nullopt;
-        return frame->ghosts;
+        return FlareAtAngle{frame->ghosts, frame->pedestal};
       },
       fits.channels, stack, options);
 }
@@ -635,39 +642,14 @@ CeilingGhost fitTrueGhost(const GhostTruth& truth, const cv::Mat& lum, const Blo
   return best;
 }
 
-// The quadratic in the pixel's x and y (1, x, y, x², xy, y²) closest to `rest` in least squares
-// over `region`, drawn over the frame and clamped at 0 (light is not negative).
+// The quadratic in the pixel's x and y (model/pedestal.h) closest to `rest` in least squares over
+// `region`, drawn over the frame and clamped at 0 (light is not negative).
 cv::Mat quadraticPedestal(const cv::Mat& rest, const cv::Mat& region) {
-  const int W = rest.cols, H = rest.rows;
-  auto terms = [&](int x, int y, double* t) {
-    // Centred and scaled by the width, for conditioning.
-    const double u = (x + 0.5 - 0.5 * W) / W, v = (y + 0.5 - 0.5 * H) / W;
-    t[0] = 1, t[1] = u, t[2] = v, t[3] = u * u, t[4] = u * v, t[5] = v * v;
-  };
-  constexpr int kTerms = 6;
-  cv::Matx<double, kTerms, kTerms> normal = cv::Matx<double, kTerms, kTerms>::zeros();
-  cv::Vec<double, kTerms> right = cv::Vec<double, kTerms>::all(0);
-  double t[kTerms];
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      if (!region.at<uchar>(y, x)) continue;
-      terms(x, y, t);
-      const double r = rest.at<float>(y, x);
-      for (int i = 0; i < kTerms; ++i) {
-        right[i] += t[i] * r;
-        for (int j = 0; j < kTerms; ++j) normal(i, j) += t[i] * t[j];
-      }
-    }
-  cv::Vec<double, kTerms> c;
-  cv::solve(normal, right, c, cv::DECOMP_SVD);
-  cv::Mat pedestal(rest.size(), CV_32F);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      terms(x, y, t);
-      double value = 0;
-      for (int i = 0; i < kTerms; ++i) value += c[i] * t[i];
-      pedestal.at<float>(y, x) = static_cast<float>(std::max(0.0, value));
-    }
+  PedestalFitOptions least_squares;
+  least_squares.outlier_sigma = 0;
+  least_squares.step = 1;
+  cv::Mat pedestal = cv::Mat::zeros(rest.size(), CV_32F);
+  fitPedestal(rest, region, rest.size(), 1, 0, least_squares).addTo(pedestal, rest.size());
   return pedestal;
 }
 

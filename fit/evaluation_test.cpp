@@ -219,7 +219,7 @@ TEST(EvaluateFrameFits, MeasuresTheFittedFramesAndLeavesTheOthersOut) {
   addFramesAt(stack, {0.7});  // a second frame, not fitted
   FrameFits fits;
   fits.image_size = kSize;
-  fits.frames.push_back({0.5, {{4, g}}});
+  fits.frames.push_back({0.5, {{4, g}}, {}});
   const auto ev = evaluateFrameFits(fits, stack);
   ASSERT_EQ(ev.frames.size(), 1u);
   EXPECT_DOUBLE_EQ(ev.frames[0].angle_deg, 0.5);
@@ -249,7 +249,7 @@ TEST(EvaluateFrameFits, SummarisesEachTrueGhostOverTheFrames) {
   off.center_x = 70;
   FrameFits fits;
   fits.image_size = kSize;
-  fits.frames = {{0.5, {{4, g}}}, {0.7, {{4, off}}}, {0.9, {{4, off}}}};
+  fits.frames = {{0.5, {{4, g}}, {}}, {0.7, {{4, off}}, {}}, {0.9, {{4, off}}, {}}};
   const auto ev = evaluateFrameFits(fits, stack);
   ASSERT_EQ(ev.true_ghosts.size(), 1u);
   const TrueGhostSummary& t = ev.true_ghosts[0];
@@ -266,7 +266,7 @@ TEST(EvaluateFrameFits, SummarisesEachTrueGhostOverTheFrames) {
   const std::string brief = ev.BriefReport();
   EXPECT_NE(brief.find("Missed most: ghost 0 in 2 of 3 frames (0.7–0.9°"), std::string::npos) << brief;
   // Found everywhere: no range, nothing named as missed.
-  fits.frames = {{0.5, {{4, g}}}, {0.7, {{4, g}}}, {0.9, {{4, g}}}};
+  fits.frames = {{0.5, {{4, g}}, {}}, {0.7, {{4, g}}, {}}, {0.9, {{4, g}}, {}}};
   const auto all = evaluateFrameFits(fits, stack);
   ASSERT_EQ(all.true_ghosts.size(), 1u);
   EXPECT_EQ(all.true_ghosts[0].frames_found, 3);
@@ -449,8 +449,8 @@ TEST(FrameFits, SavesAndLoadsEveryParameterExactly) {
   fits.channels = 1;
   model::GhostParameters g = disc(100.125, 65.1, 20.3, 1e-3 / 3);
   g.inside_exponent = 2.5;
-  fits.frames.push_back({0.1, {{2, g}, {5, disc(10, 20, 3, 0.5)}}});
-  fits.frames.push_back({0.30000000000000004, {}});
+  fits.frames.push_back({0.1, {{2, g}, {5, disc(10, 20, 3, 0.5)}}, {}});
+  fits.frames.push_back({0.30000000000000004, {}, {}});
   fits.save(dir / "frame_fits.json");
   const FrameFits back = FrameFits::load(dir / "frame_fits.json");
   EXPECT_EQ(back.image_size, kSize);

@@ -45,7 +45,7 @@ bool TrackingOptions::IsValid(std::string* error) const {
 
 bool FitOptions::IsValid(std::string* error) const {
   if (!cost.IsValid(error) || !solver.IsValid(error) || !detection.IsValid(error) ||
-      !tracking.IsValid(error))
+      !tracking.IsValid(error) || !pedestal_fit.IsValid(error))
     return false;
   if (!auto_degree && (degree < 0 || degree > model::kMaxPolynomialDegree)) {
     if (error) *error = "degree must be in [0, " + std::to_string(model::kMaxPolynomialDegree) + "]";
@@ -664,6 +664,32 @@ void refineTracksTogether(const std::vector<GhostTrackFit>& tracks,
 }
 
 }  // namespace
+
+std::optional<model::PedestalTrack> buildPedestalTrack(
+    const std::vector<double>& angles_deg, const std::vector<model::Pedestal>& pedestals,
+    int channels, int degree, double range_margin_deg, double capture_min_deg,
+    double capture_max_deg) {
+  if (angles_deg.empty()) return std::nullopt;
+  model::PedestalTrack track;
+  track.angle_min_deg = std::max(
+      capture_min_deg, *std::min_element(angles_deg.begin(), angles_deg.end()) - range_margin_deg);
+  track.angle_max_deg = std::min(
+      capture_max_deg, *std::max_element(angles_deg.begin(), angles_deg.end()) + range_margin_deg);
+  const int d = std::min(degree, static_cast<int>(angles_deg.size()) - 1);
+  for (int k = 0; k < model::kPedestalTerms * channels; ++k) {
+    std::vector<double> values;
+    for (const model::Pedestal& p : pedestals) values.push_back(p.coefficients[k]);
+    const std::vector<bool> in = polynomialInliers(angles_deg, values, d);
+    std::vector<double> a, v;
+    for (size_t i = 0; i < angles_deg.size(); ++i)
+      if (in[i]) {
+        a.push_back(angles_deg[i]);
+        v.push_back(values[i]);
+      }
+    track.terms.push_back(fitPolynomial(a, v, d));
+  }
+  return track;
+}
 
 model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   const model::CaptureInfo& info, int channels, int degree,
@@ -1344,13 +1370,17 @@ class CaptureFitter {
     return cv::max(light, 0) * fraction;
   }
 
-  // The residual (luminance) of the frame minus `ghosts` at level `level.factor`.
-  cv::Mat residualAt(const FrameData& level, const std::vector<GhostParameters>& ghosts) const {
+  // `ghosts` rendered at level `level.factor` (zeros for none).
+  cv::Mat renderedAt(const FrameData& level, const std::vector<GhostParameters>& ghosts) const {
+    if (ghosts.empty()) return cv::Mat::zeros(level.image.size(), level.image.type());
     model::ViewTransform view;
     view.scale = 1.0 / level.factor;
-    if (ghosts.empty()) return luminance(level.image);
-    cv::Mat modelled = model::renderGhosts(ghosts, level.image.size(), stack_.channels, {}, view);
-    return luminance(level.image - modelled);
+    return model::renderGhosts(ghosts, level.image.size(), stack_.channels, {}, view);
+  }
+
+  // The residual (luminance) of the frame minus `ghosts` at level `level.factor`.
+  cv::Mat residualAt(const FrameData& level, const std::vector<GhostParameters>& ghosts) const {
+    return luminance(level.image - renderedAt(level, ghosts));
   }
 
   void detectNew(int pos, const FramePyramid& data, std::vector<int>& ids,
@@ -1565,19 +1595,23 @@ class CaptureFitter {
     s.frames_fitted = static_cast<int>(positions_.size());
     s.degree = options_.auto_degree ? -1 : options_.degree;
     s.warnings = stack_.warnings;
-    // Residual RMS per ghost and frame, against the final fits of every frame.
+    // Residual RMS per ghost and frame, against the final fits of every frame; and each frame's
+    // pedestal, fitted to what they leave.
     std::map<int, std::vector<std::pair<int, GhostParameters>>> by_frame;
     for (const auto& t : tracks_)
       for (const auto& [pos, g] : t.fits) by_frame[pos].push_back({t.id, g});
     std::map<int, std::map<int, double>> rms;  // id → pos → rms
-    for (auto& [pos, list] : by_frame) {
+    for (int pos = 0; pos < static_cast<int>(positions_.size()); ++pos) {
+      const auto& list = by_frame[pos];
+      if (list.empty() && !options_.pedestal) continue;
       std::vector<GhostParameters> all;
       for (const auto& [id, g] : list) all.push_back(g);
       // Against the frame without the light's image: the light is not a ghost the model failed.
       FramePyramid pyramid(withoutLight(pos), validOf(pos), edge_, noiseOf(pos));
       const int kd = detectionFactor();
       const FrameData& level = pyramid.level(kd);
-      cv::Mat residual = residualAt(level, all);
+      const cv::Mat left = level.image - renderedAt(level, all);
+      const cv::Mat residual = luminance(left);
       for (const auto& [id, g] : list) {
         const cv::Rect2d b = model::outlineBounds(g);
         const cv::Rect box = cv::Rect(cv::Rect2d(b.x / kd, b.y / kd, b.width / kd, b.height / kd)) &
@@ -1594,6 +1628,14 @@ class CaptureFitter {
       for (const auto& [id, g] : list) {
         record.ghost_ids.push_back(id);
         record.ghosts.push_back(g);
+      }
+      // The glow is smooth: detection's level samples it finely enough.
+      if (options_.pedestal) {
+        record.pedestal = fitPedestal(left, level.valid, stack_.size, kd, level.noise_sigma,
+                                      options_.pedestal_fit);
+        FrameData& kept = levels_[pos] = level;
+        kept.edge.release();  // not needed again
+        kept.edge_valid.release();
       }
     }
     for (const auto& t : tracks_) {
@@ -1650,6 +1692,24 @@ class CaptureFitter {
                                    angle(0), angle(static_cast<int>(positions_.size()) - 1),
                                    options_.refine_in_image, options_.joint_refine_sweeps);
     for (const auto& [pos, fit] : frame_fits_) result.frames.push_back(fit);
+    if (options_.pedestal) {
+      // The model's pedestal is what the model's ghosts leave, not the fits': the polynomials
+      // draw the ghosts otherwise than their fits did, and the glow makes up for it too.
+      std::vector<double> angles;
+      std::vector<model::Pedestal> pedestals;
+      for (const auto& [pos, level] : levels_) {
+        std::vector<GhostParameters> ghosts;
+        for (const auto& g : result.model.ghostsAt(angle(pos))) ghosts.push_back(g.parameters);
+        angles.push_back(angle(pos));
+        pedestals.push_back(fitPedestal(level.image - renderedAt(level, ghosts), level.valid,
+                                        stack_.size, level.factor, level.noise_sigma,
+                                        options_.pedestal_fit));
+      }
+      levels_.clear();
+      result.model.pedestal =
+          buildPedestalTrack(angles, pedestals, stack_.channels, kGlareDegree, margin, angle(0),
+                             angle(static_cast<int>(positions_.size()) - 1));
+    }
     s.ghosts = static_cast<int>(result.tracks.size());
     s.detections = detections_;
     s.detections_rejected = rejected_;
@@ -1667,6 +1727,7 @@ class CaptureFitter {
   std::map<int, FrameFit> frame_fits_;
   std::vector<LightImage> lights_;  // by position in the fitted frame list (lightOf)
   std::map<int, double> noise_;       // noise σ by position
+  std::map<int, FrameData> levels_;   // detection's level of each frame, for the model's pedestal
   int next_id_ = 0;
   int detections_ = 0, rejected_ = 0;
   int group_resolves_ = 0;  // groups solved again because the groups before them moved onto them

@@ -27,6 +27,7 @@
 //     together towards the sum of the fits in each frame (buildFlareModel).
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,7 @@
 #include "fit/detection.h"
 #include "fit/frames.h"
 #include "fit/group_solver.h"
+#include "fit/pedestal.h"
 #include "model/flare_model.h"
 
 namespace flarekit::fit {
@@ -111,6 +113,11 @@ struct FitOptions {
   // Tessar 51.4 → 71.1 %, 78.0 → 69.0 %, 22.5 → 21.9 dB, 15.6 → 10.1 px. The pixel noise alone,
   // without the light's floor: Heliar 70.2 / 81.1 / 21.8 / 8.2, Tessar 71.2 / 66.7 / 21.6 / 10.9.
   bool pixel_noise = true;
+  // Fit each frame's pedestal (model/pedestal.h) to what its final ghosts leave of it
+  // (fit/pedestal.h), once the tracks stand, and the model's to what the model's ghosts leave,
+  // through polynomials (buildPedestalTrack). The ghosts are found and fitted without it.
+  bool pedestal = true;
+  PedestalFitOptions pedestal_fit;
   // Threads for the model renderer (≥ 1); the fit is the same for any number.
   int threads = 2;
   // Progress on stderr.
@@ -142,6 +149,7 @@ struct FrameFit {
   double light_zone_px = 0;
   std::vector<int> ghost_ids;       // the ghosts fitted in this frame
   std::vector<model::GhostParameters> ghosts;
+  model::Pedestal pedestal;         // the glow the ghosts leave (FitOptions::pedestal); or empty
   double cost = 0;                  // sum of the groups' final costs
   long long evaluations = 0;
   int iterations = 0;
@@ -211,6 +219,15 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   double range_margin_deg = 0, double capture_min_deg = -90,
                                   double capture_max_deg = 90, bool refine_in_image = false,
                                   int joint_sweeps = 0);
+
+// The model's pedestal (model/pedestal.h) through the pedestals of frames at `angles_deg`: per
+// term, a least-squares polynomial of `degree` (fewer with fewer frames) through all but its
+// spikes (polynomialInliers), `range_margin_deg` beyond the frames within [capture_min_deg,
+// capture_max_deg] as buildFlareModel's ranges. nullopt without frames.
+std::optional<model::PedestalTrack> buildPedestalTrack(
+    const std::vector<double>& angles_deg, const std::vector<model::Pedestal>& pedestals,
+    int channels, int degree, double range_margin_deg, double capture_min_deg,
+    double capture_max_deg);
 
 // Tracks whose polynomials cannot follow their fits, split until they can: a track that turns
 // from glare into a sharp ghost or back (fit/cost.h isGlare) for at least min_frames fits on either

@@ -620,6 +620,61 @@ TEST(FitCapture, HoldsASharpGhostApartFromThePedestalUnderIt) {
   EXPECT_EQ(glare, 1) << r.summary.BriefReport();
 }
 
+// A sharp ghost on a glow that rises towards the top and bottom edges, away from the flare axis,
+// and fades with θ: a glare can hold its mean only, and detection looks for ghosts on the axis;
+// the pedestal (model/pedestal.h) draws it, in the frames' fits and in the model.
+TEST(FitCapture, DrawsTheGlowTheGhostsLeaveAsAPedestal) {
+  FrameStack stack = testStack();
+  cv::theRNG().state = 5;
+  std::vector<cv::Mat> truth;
+  for (int i = 0; i < 9; ++i) {
+    const double theta = 0.25 * i;
+    Frame f = ghostFrame(stack, i, theta, {ghostAt(50 + 8 * theta, 1, 0.4)});
+    cv::Mat glow(stack.size, CV_32F);
+    for (int y = 0; y < glow.rows; ++y)
+      for (int x = 0; x < glow.cols; ++x) {
+        const double v = (y + 0.5 - 50) / 160;  // model/pedestal.h's v
+        glow.at<float>(y, x) = static_cast<float>((0.4 - 0.05 * theta) * v * v);
+      }
+    f.image += glow;
+    truth.push_back(f.image.clone());
+    addNoise(f, 0.005);
+    stack.frames.push_back(f);
+  }
+  FitOptions options;
+  options.progress = false;
+  // RMS of the frames' fits' and the model's images against the noise-free frames.
+  auto errors = [&](const FitResult& r) {
+    double fits = 0, model = 0;
+    for (const FrameFit& ff : r.frames) {
+      cv::Mat drawn = model::renderGhosts(ff.ghosts, stack.size, 1);
+      ff.pedestal.addTo(drawn, stack.size);
+      fits += std::pow(cv::norm(drawn, truth[ff.frame], cv::NORM_L2), 2);
+      model += std::pow(cv::norm(r.model.render(ff.angle_deg), truth[ff.frame], cv::NORM_L2), 2);
+    }
+    const double n = double(r.frames.size()) * stack.size.area();
+    return std::pair(std::sqrt(fits / n), std::sqrt(model / n));
+  };
+  options.pedestal = false;
+  const FitResult without = fitCapture(stack, options);
+  EXPECT_FALSE(without.model.pedestal.has_value());
+  options.pedestal = true;
+  const FitResult with = fitCapture(stack, options);
+  ASSERT_TRUE(with.model.pedestal.has_value());
+  const auto [fits_without, model_without] = errors(without);
+  const auto [fits_with, model_with] = errors(with);
+  // The glow is 0.039 at the edges at θ = 0 (8 σ of the noise).
+  EXPECT_GT(fits_without, 0.01);
+  EXPECT_GT(model_without, 0.01);
+  EXPECT_LT(fits_with, 0.1 * fits_without);
+  EXPECT_LT(model_with, 0.1 * model_without);
+  // The ghost is found as it was.
+  int found = 0;
+  for (const auto& g : with.model.ghostsAt(1.0))
+    found += std::abs(g.parameters.center_x - 58) < 0.5 && std::abs(g.parameters.left - 15) < 0.5;
+  EXPECT_EQ(found, 1);
+}
+
 // Frames in which a fit's ghosts were carried through the light rather than fitted.
 int carriedFrames(const FitResult& r) {
   int carried = 0;

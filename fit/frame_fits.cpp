@@ -17,6 +17,7 @@ FrameFits FrameFits::fromResult(const FitResult& result, cv::Size image_size, in
     FittedFrame frame;
     frame.angle_deg = ff.angle_deg;
     for (size_t k = 0; k < ff.ghosts.size(); ++k) frame.ghosts.push_back({ff.ghost_ids[k], ff.ghosts[k]});
+    frame.pedestal = ff.pedestal;
     f.frames.push_back(std::move(frame));
   }
   return f;
@@ -42,7 +43,7 @@ FrameFits FrameFits::parse(const std::string& text, const std::string& file) {
   const std::vector<std::string> names = model::parameterNames(f.channels);
   for (size_t i = 0; i < frames.size(); ++i) {
     const ConfigNode fr = frames[i];
-    fr.checkKnownKeys({"angle_deg", "ghosts"});
+    fr.checkKnownKeys({"angle_deg", "ghosts", "pedestal"});
     FittedFrame frame;
     frame.angle_deg = fr["angle_deg"].number();
     if (!f.frames.empty() && !(frame.angle_deg > f.frames.back().angle_deg))
@@ -62,6 +63,14 @@ FrameFits FrameFits::parse(const std::string& text, const std::string& file) {
       std::string problem;
       if (!model::isValid(ghost.parameters, &problem)) params.fail(problem);
       frame.ghosts.push_back(ghost);
+    }
+    frame.pedestal.channels = f.channels;
+    if (fr.has("pedestal")) {
+      const ConfigNode p = fr["pedestal"];
+      if (!p.isObject()) p.fail("must be a table of pedestal terms");
+      p.checkKnownKeys(model::pedestalTermNames(f.channels));
+      for (const std::string& name : model::pedestalTermNames(f.channels))
+        frame.pedestal.coefficients.push_back(p[name].number());
     }
     f.frames.push_back(std::move(frame));
   }
@@ -90,7 +99,15 @@ nlohmann::json FrameFits::toJson() const {
       for (size_t k = 0; k < values.size(); ++k) params[names[k]] = values[k];
       ghosts.push_back({{"id", g.id}, {"parameters", params}});
     }
-    list.push_back({{"angle_deg", frame.angle_deg}, {"ghosts", ghosts}});
+    nlohmann::json entry = {{"angle_deg", frame.angle_deg}, {"ghosts", ghosts}};
+    if (!frame.pedestal.empty()) {
+      nlohmann::json terms = nlohmann::json::object();
+      for (size_t k = 0; k < frame.pedestal.coefficients.size(); ++k)
+        terms[model::pedestalTermName(static_cast<int>(k), channels)] =
+            frame.pedestal.coefficients[k];
+      entry["pedestal"] = terms;
+    }
+    list.push_back(entry);
   }
   j["frames"] = list;
   return j;

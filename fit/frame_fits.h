@@ -9,12 +9,14 @@
 //     "image_width": 640, "image_height": 427, "channels": 1,
 //     "frames": [
 //       { "angle_deg": 0.2,
-//         "ghosts": [ { "id": 3, "parameters": { "Mx": 301.5, "My": 213.5, ..., "Eo": 1.2 } } ] }
+//         "ghosts": [ { "id": 3, "parameters": { "Mx": 301.5, "My": 213.5, ..., "Eo": 1.2 } } ],
+//         "pedestal": { "P00": 4e-5, "P10": -1e-5, ..., "P02": 0.0 } }      // optional
 //     ]
 //   }
 //
 // Parameters are named as in the model file (model/ghost_shape.h parameterName) and must be valid
-// ghost parameters; frames are in ascending angle order, each angle once.
+// ghost parameters; the pedestal's terms as model/pedestal.h names them, all present when it is;
+// frames are in ascending angle order, each angle once.
 
 #include <filesystem>
 #include <string>
@@ -37,6 +39,7 @@ struct FrameFits {
   struct FittedFrame {
     double angle_deg = 0;
     std::vector<model::GhostAtAngle> ghosts;
+    model::Pedestal pedestal;  // empty: none
   };
   std::vector<FittedFrame> frames;  // ascending angle
 

@@ -306,9 +306,10 @@ void writeFitReport(const fs::path& dir, const FitResult& result, const FrameSta
       const int i = count == 1 ? 0 : k * (n - 1) / (count - 1);
       const FrameFit& ff = result.frames[i];
       const Frame& f = stack.frames[ff.frame];
-      // The ghosts as this frame's fits drew them, and as the model file has them (polynomials):
-      // what users get, and what of it the polynomials lost.
-      const cv::Mat fits_image = model::renderGhosts(ff.ghosts, stack.size, stack.channels);
+      // The flare as this frame's fits drew it, and as the model file has it (polynomials): what
+      // users get, and what of it the polynomials lost.
+      cv::Mat fits_image = model::renderGhosts(ff.ghosts, stack.size, stack.channels);
+      ff.pedestal.addTo(fits_image, stack.size);
       const cv::Mat model_image = result.model.render(f.angle_deg, 0, stack.size);
       cv::Mat sheet = contactSheet(f.image, fits_image, model_image, ff.noise_sigma);
       std::ostringstream name;

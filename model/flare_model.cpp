@@ -109,6 +109,62 @@ std::string trackProblem(const GhostTrack& g, int channels, std::string* key) {
   return {};
 }
 
+// The first problem of a pedestal track, or "": like trackProblem, without bounds on the values.
+std::string pedestalProblem(const PedestalTrack& p, int channels, std::string* key) {
+  const int n = kPedestalTerms * channels;
+  if (static_cast<int>(p.terms.size()) != n) {
+    *key = "terms";
+    return "has " + std::to_string(p.terms.size()) + " polynomials, expected " + std::to_string(n);
+  }
+  if (!std::isfinite(p.angle_min_deg)) {
+    *key = "angle_min_deg";
+    return "must be finite";
+  }
+  if (!std::isfinite(p.angle_max_deg)) {
+    *key = "angle_max_deg";
+    return "must be finite";
+  }
+  if (p.angle_max_deg < p.angle_min_deg) {
+    *key = "angle_max_deg";
+    return "empty angle range: " + formatNumber(p.angle_max_deg) + " is below angle_min_deg " +
+           formatNumber(p.angle_min_deg);
+  }
+  for (int k = 0; k < n; ++k) {
+    const auto& c = p.terms[k].coefficients;
+    *key = "terms." + pedestalTermName(k, channels);
+    if (c.empty()) return "needs at least one coefficient";
+    if (static_cast<int>(c.size()) > kMaxPolynomialDegree + 1)
+      return "has degree " + std::to_string(c.size() - 1) + ", at most " +
+             std::to_string(kMaxPolynomialDegree) + " is supported";
+    for (size_t i = 0; i < c.size(); ++i)
+      if (!std::isfinite(c[i])) return "coefficient " + std::to_string(i) + " is not finite";
+  }
+  return {};
+}
+
+PedestalTrack parsePedestal(const ConfigNode& node, int channels) {
+  if (!node.isObject()) node.fail("must be a table");
+  node.checkKnownKeys({"angle_min_deg", "angle_max_deg", "terms"});
+  PedestalTrack p;
+  p.angle_min_deg = node["angle_min_deg"].number();
+  p.angle_max_deg = node["angle_max_deg"].number();
+  const ConfigNode terms = node["terms"];
+  if (!terms.isObject()) terms.fail("must be a table of polynomials");
+  terms.checkKnownKeys(pedestalTermNames(channels));
+  for (const std::string& name : pedestalTermNames(channels)) {
+    const ConfigNode t = terms[name];
+    if (!t.isArray()) t.fail("must be an array of polynomial coefficients");
+    p.terms.push_back(Polynomial{t.numbers()});
+  }
+  std::string key;
+  const std::string problem = pedestalProblem(p, channels, &key);
+  if (!problem.empty()) {
+    if (key.rfind("terms.", 0) == 0) terms[key.substr(6)].fail(problem);
+    node[key].fail(problem);
+  }
+  return p;
+}
+
 GhostTrack parseGhost(const ConfigNode& node, int channels) {
   if (!node.isObject()) node.fail("must be a table");
   node.checkKnownKeys({"id", "angle_min_deg", "angle_max_deg", "parameters"});
@@ -148,7 +204,7 @@ double Polynomial::evaluate(double theta) const {
 FlareModel FlareModel::parse(const std::string& text_in, const std::string& file) {
   const ConfigNode root = parseJson(text_in, file);
   checkFormat(root, kFlareModelFormat, kFlareModelVersion);
-  root.checkKnownKeys({"format", "version", "capture", "channels", "ghosts"});
+  root.checkKnownKeys({"format", "version", "capture", "channels", "ghosts", "pedestal"});
   FlareModel m;
   m.capture = parseCapture(root["capture"]);
   const ConfigNode ch = root["channels"];
@@ -163,6 +219,7 @@ FlareModel FlareModel::parse(const std::string& text_in, const std::string& file
     if (!ids.insert(g.id).second) ghosts[i]["id"].fail("duplicate ghost id " + std::to_string(g.id));
     m.ghosts.push_back(std::move(g));
   }
+  if (root.has("pedestal")) m.pedestal = parsePedestal(root["pedestal"], m.channels);
   return m;
 }
 
@@ -196,6 +253,11 @@ bool FlareModel::IsValid(std::string* error) const {
     const std::string problem = trackProblem(g, channels, &key);
     if (!problem.empty()) return fail("ghosts[" + std::to_string(i) + "]." + key + ": " + problem);
   }
+  if (pedestal) {
+    std::string key;
+    const std::string problem = pedestalProblem(*pedestal, channels, &key);
+    if (!problem.empty()) return fail("pedestal." + key + ": " + problem);
+  }
   return true;
 }
 
@@ -228,6 +290,14 @@ nlohmann::json FlareModel::toJson() const {
                     {"parameters", params}});
   }
   j["ghosts"] = list;
+  if (pedestal) {
+    nlohmann::json terms = nlohmann::json::object();
+    for (size_t k = 0; k < pedestal->terms.size(); ++k)
+      terms[pedestalTermName(static_cast<int>(k), channels)] = pedestal->terms[k].coefficients;
+    j["pedestal"] = {{"angle_min_deg", pedestal->angle_min_deg},
+                     {"angle_max_deg", pedestal->angle_max_deg},
+                     {"terms", terms}};
+  }
   return j;
 }
 
@@ -250,6 +320,18 @@ std::vector<GhostAtAngle> FlareModel::ghostsAt(double angle_deg) const {
   return out;
 }
 
+Pedestal PedestalTrack::at(double angle_deg, int channels) const {
+  Pedestal p;
+  p.channels = channels;
+  for (const Polynomial& t : terms) p.coefficients.push_back(t.evaluate(angle_deg));
+  return p;
+}
+
+Pedestal FlareModel::pedestalAt(double angle_deg) const {
+  if (!pedestal || !pedestal->covers(angle_deg)) return Pedestal{channels, {}};
+  return pedestal->at(angle_deg, channels);
+}
+
 ViewTransform FlareModel::viewAt(double roll_deg, std::optional<cv::Size> size) const {
   const cv::Size s = size.value_or(capture.image_size);
   ViewTransform v;
@@ -265,7 +347,10 @@ cv::Mat FlareModel::render(double angle_deg, double roll_deg, std::optional<cv::
   const cv::Size s = size.value_or(capture.image_size);
   std::vector<GhostParameters> params;
   for (const GhostAtAngle& g : ghostsAt(angle_deg)) params.push_back(g.parameters);
-  return renderGhosts(params, s, channels, options, viewAt(roll_deg, size));
+  const ViewTransform view = viewAt(roll_deg, size);
+  cv::Mat image = renderGhosts(params, s, channels, options, view);
+  pedestalAt(angle_deg).addTo(image, capture.image_size, view);
+  return image;
 }
 
 }  // namespace flarekit::model

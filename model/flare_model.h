@@ -14,12 +14,16 @@
 //     "ghosts": [
 //       { "id": 3, "angle_min_deg": -20.0, "angle_max_deg": 25.0,
 //         "parameters": { "Mx": [c0, c1, c2], "My": [...], "L": [...], ..., "Eo": [...] } }
-//     ]
+//     ],
+//     "pedestal": { "angle_min_deg": 0.0, "angle_max_deg": 30.0,     // optional
+//                   "terms": { "P00": [c0, ...], "P10": [...], ..., "P02": [...] } }
 //   }
 //
 // Parameters are named as parameterName() says ("Ib_R" etc. for RGB) and all must be present.
 // Coefficient k multiplies θ^k with θ in degrees (the file's unit): p(θ) = c0 + c1·θ + c2·θ² + …
-// (evaluated by Horner's rule, degree ≤ 10). Lengths are in capture pixels.
+// (evaluated by Horner's rule, degree ≤ 10). Lengths are in capture pixels. The pedestal (the
+// smooth glow under the ghosts, model/pedestal.h) is a polynomial in θ per term likewise; a file
+// without one has none.
 //
 // Angles: θ is the rig angle (shared/DESIGN.md; positive moves the light image to −x) and φ the
 // roll about the image centre, both in degrees at this API, as in files and on the command line.
@@ -34,6 +38,7 @@
 
 #include "model/ghost_shape.h"
 #include "model/model_renderer.h"
+#include "model/pedestal.h"
 
 namespace flarekit::model {
 
@@ -86,6 +91,19 @@ struct GhostTrack {
   GhostParameters at(double angle_deg, int channels) const;
 };
 
+// The pedestal of the model (model/pedestal.h): one polynomial per term over an angle range.
+struct PedestalTrack {
+  double angle_min_deg = 0;
+  double angle_max_deg = 0;
+  std::vector<Polynomial> terms;  // kPedestalTerms × channels, in pedestalTermName order
+
+  bool covers(double angle_deg) const {
+    return angle_deg >= angle_min_deg && angle_deg <= angle_max_deg;
+  }
+  // The pedestal at θ (degrees; range not checked).
+  Pedestal at(double angle_deg, int channels) const;
+};
+
 // A ghost evaluated at one angle.
 struct GhostAtAngle {
   int id = 0;
@@ -97,12 +115,14 @@ class FlareModel {
   CaptureInfo capture;
   int channels = 1;                 // 1 or 3
   std::vector<GhostTrack> ghosts;
+  std::optional<PedestalTrack> pedestal;
 
   // Reads and validates a model file. Throws InputError "<file>: <key path>: <problem>" for
   // anything wrong: syntax, format or version, missing or unknown keys, wrong types, non-finite
   // numbers, non-positive sizes, an empty angle range (θmax < θmin), duplicate ids, missing
   // parameters, degree above kMaxPolynomialDegree, or a parameter outside its allowed range
-  // (parameterBounds) at any of 65 evenly spaced angles across the ghost's range.
+  // (parameterBounds) at any of 65 evenly spaced angles across the ghost's range; likewise for the
+  // pedestal's range and terms (which have no bounds).
   static FlareModel load(const std::filesystem::path& path);
   // Parses the JSON text of a model file; `file` names it in errors.
   static FlareModel parse(const std::string& text, const std::string& file);
@@ -118,14 +138,17 @@ class FlareModel {
   // parameterBounds (polynomials can stray between the angles load checked). Ghosts outside their
   // range are absent.
   std::vector<GhostAtAngle> ghostsAt(double angle_deg) const;
+  // The pedestal at θ, empty where the model has none or its range does not cover θ.
+  Pedestal pedestalAt(double angle_deg) const;
 
   // The ghosts at θ as rendered into an image of `size` (default: the capture size) at roll φ
   // about the image centre: the view maps the image centre (W/2, H/2) to the capture centre and
   // scales by W / capture width (the flare keeps its size relative to the image width).
   ViewTransform viewAt(double roll_deg, std::optional<cv::Size> size = std::nullopt) const;
 
-  // Renders all ghosts at θ and roll φ (degrees) into an image of `size` (default: the capture
-  // size), CV_32FC(channels). The roll rotates the sample points about the image centre exactly.
+  // Renders all ghosts and the pedestal at θ and roll φ (degrees) into an image of `size`
+  // (default: the capture size), CV_32FC(channels). The roll rotates the sample points about the
+  // image centre exactly.
   cv::Mat render(double angle_deg, double roll_deg = 0, std::optional<cv::Size> size = std::nullopt,
                  const RenderOptions& options = {}) const;
 };

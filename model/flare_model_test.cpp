@@ -50,6 +50,27 @@ FlareModel sampleModel(int channels = 1) {
   return m;
 }
 
+// sampleModel with a pedestal over 0–20°: a glow brightest left of the centre, fading with θ.
+FlareModel sampleModelWithPedestal(int channels = 1) {
+  FlareModel m = sampleModel(channels);
+  PedestalTrack p;
+  p.angle_min_deg = 0;
+  p.angle_max_deg = 20;
+  for (int c = 0; c < channels; ++c) {
+    const double gain = 1 - 0.2 * c;
+    for (const std::vector<double>& t :
+         std::vector<std::vector<double>>{{0.02 * gain, -1e-3 * gain},
+                                          {-0.01 * gain},
+                                          {0},
+                                          {-0.03 * gain, 1e-4},
+                                          {0},
+                                          {-0.02 * gain}})
+      p.terms.push_back(Polynomial{t});
+  }
+  m.pedestal = p;
+  return m;
+}
+
 std::string writeModelText(const TempDir& dir, const std::string& name, const nlohmann::json& j) {
   const std::string path = (dir / name).string();
   std::ofstream(path) << j.dump(2);
@@ -125,6 +146,32 @@ TEST(FlareModel, FileRoundTripIsExact) {
   }
 }
 
+TEST(FlareModel, APedestalRoundTripsAndIsDrawnWithinItsRange) {
+  TempDir dir;
+  for (int channels : {1, 3}) {
+    const FlareModel m = sampleModelWithPedestal(channels);
+    const auto path = dir / ("pedestal" + std::to_string(channels) + ".json");
+    m.save(path);
+    const FlareModel back = FlareModel::load(path);
+    EXPECT_EQ(back.toJson(), m.toJson());
+    ASSERT_TRUE(back.pedestal.has_value());
+    EXPECT_EQ(cv::norm(back.render(3, 10), m.render(3, 10), cv::NORM_INF), 0.0);
+    // The render is the ghosts plus the pedestal where the pedestal's range covers θ, the
+    // ghosts alone beyond it.
+    FlareModel ghosts_only = m;
+    ghosts_only.pedestal.reset();
+    const cv::Mat with = m.render(5), without = ghosts_only.render(5);
+    cv::Mat expected = without.clone();
+    m.pedestalAt(5).addTo(expected, m.capture.image_size);
+    EXPECT_EQ(cv::norm(with, expected, cv::NORM_INF), 0.0);
+    EXPECT_GT(cv::norm(with, without, cv::NORM_INF), 0.01);
+    EXPECT_EQ(cv::norm(m.render(25), ghosts_only.render(25), cv::NORM_INF), 0.0);
+    EXPECT_TRUE(m.pedestalAt(25).empty());
+  }
+  // A model without a pedestal writes none.
+  EXPECT_FALSE(sampleModel().toJson().contains("pedestal"));
+}
+
 TEST(FlareModel, RenderAtAnotherSizeScalesAboutTheCentre) {
   const FlareModel m = sampleModel();
   const cv::Mat full = m.render(0);
@@ -148,7 +195,8 @@ TEST(FlareModel, BadFilesAreRejectedWithTheFileAndKey) {
       {"wrong_version", [](auto& j) { j["version"] = 2; }, "version"},
       {"missing_capture", [](auto& j) { j.erase("capture"); }, "capture"},
       {"missing_lens", [](auto& j) { j["capture"].erase("lens"); }, "lens"},
-      {"missing_parameter", [](auto& j) { j["ghosts"][1]["parameters"].erase("Cl"); }, "ghosts[1].parameters"},
+      {"missing_parameter", [](auto& j) { j["ghosts"][1]["parameters"].erase("Cl"); },
+       "ghosts[1].parameters"},
       {"unknown_parameter", [](auto& j) { j["ghosts"][0]["parameters"]["Zz"] = {1}; }, "Zz"},
       {"nan_coefficient", [](auto& j) { j["ghosts"][0]["parameters"]["Mx"][1] = nullptr; }, "Mx"},
       {"string_coefficient", [](auto& j) { j["ghosts"][0]["parameters"]["Fo"] = {"NaN"}; }, "Fo"},
@@ -158,12 +206,26 @@ TEST(FlareModel, BadFilesAreRejectedWithTheFileAndKey) {
       {"empty_range", [](auto& j) { j["ghosts"][0]["angle_max_deg"] = -20; }, "empty angle range"},
       {"duplicate_id", [](auto& j) { j["ghosts"][1]["id"] = 3; }, "duplicate"},
       {"bad_channels", [](auto& j) { j["channels"] = 2; }, "channels"},
-      {"empty_polynomial", [](auto& j) { j["ghosts"][1]["parameters"]["Ei"] = nlohmann::json::array(); }, "Ei"},
-      {"size_goes_negative", [](auto& j) { j["ghosts"][1]["parameters"]["R"] = {15, -1}; }, "R"},
+      {"empty_polynomial",
+       [](auto& j) { j["ghosts"][1]["parameters"]["Ei"] = nlohmann::json::array(); }, "Ei"},
+      {"size_goes_negative",
+       [](auto& j) {
+         j["ghosts"][1]["parameters"]["R"] = {15, -1};
+       },
+       "R"},
       {"ghosts_not_array", [](auto& j) { j["ghosts"] = 3; }, "ghosts"},
+      {"pedestal_missing_term", [](auto& j) { j["pedestal"]["terms"].erase("P11"); }, "P11"},
+      {"pedestal_unknown_term", [](auto& j) { j["pedestal"]["terms"]["P30"] = {0}; }, "P30"},
+      {"pedestal_nan_term", [](auto& j) { j["pedestal"]["terms"]["P20"][0] = nullptr; }, "P20"},
+      {"pedestal_too_high_degree",
+       [](auto& j) { j["pedestal"]["terms"]["P10"] = std::vector<double>(12, 0.0); }, "P10"},
+      {"pedestal_empty_range", [](auto& j) { j["pedestal"]["angle_max_deg"] = -1; },
+       "empty angle range"},
+      {"pedestal_not_table", [](auto& j) { j["pedestal"] = 1; }, "pedestal"},
   };
+  const nlohmann::json with_pedestal = sampleModelWithPedestal().toJson();
   for (const Case& c : cases) {
-    nlohmann::json j = good;
+    nlohmann::json j = c.name.rfind("pedestal", 0) == 0 ? with_pedestal : good;
     c.edit(j);
     const std::string path = writeModelText(dir, c.name + ".json", j);
     try {

@@ -164,7 +164,9 @@ cv::Mat renderLight(const model::FlareModel& m, double model_angle_deg, double m
   std::vector<model::GhostParameters> ghosts;
   for (const auto& g : m.ghostsAt(model_angle_deg)) ghosts.push_back(g.parameters);
   // Walch 2018 §3.4.1: the rendering is rotated about the image centre to the light's roll.
-  cv::Mat img = model::renderGhosts(ghosts, image_size, m.channels, options, m.viewAt(model_roll_deg, image_size));
+  const model::ViewTransform view = m.viewAt(model_roll_deg, image_size);
+  cv::Mat img = model::renderGhosts(ghosts, image_size, m.channels, options, view);
+  m.pedestalAt(model_angle_deg).addTo(img, m.capture.image_size, view);  // the glow under them
   // A model value of clip_level clips in a capture frame; after Eq. 2's B (the scene's exposure
   // against the capture's), model·B / clip_level is the fraction of the scene camera's white.
   if (m.capture.clip_level > 0) brightness /= m.capture.clip_level;
@@ -200,7 +202,7 @@ cv::Mat renderLights(const model::FlareModel& m, const Scene& scene, const Camer
     cv::Mat own;
     if (p.geometry.status == LightStatus::kInRange && p.illuminance_lux > 0) {
       p.ghost_count = static_cast<int>(m.ghostsAt(p.geometry.model_angle_deg).size());
-      if (p.ghost_count > 0) {
+      if (p.ghost_count > 0 || !m.pedestalAt(p.geometry.model_angle_deg).empty()) {
         // Walch 2018 §3.4.1: each light's ghosts at its θ and roll, scaled by Eq. 2, added.
         own = renderLight(m, p.geometry.model_angle_deg, p.geometry.model_roll_deg, p.brightness.scale,
                           normalisedColor(light.color), size, options.render);

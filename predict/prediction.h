@@ -129,9 +129,10 @@ cv::Mat renderOverlay(const model::FlareModel& model, const Scene& scene, const 
 double captureIlluminance(const model::FlareModel& model, const PredictOptions& options,
                           std::string* source = nullptr);
 
-// The overlay of one light of brightness `brightness` at model angle θ and roll φ (CV_32FC3), in
-// fractions of the white level when the model records its capture's clip level (the model's
-// values divided by it), else in the model's units.
+// The overlay of one light of brightness `brightness` at model angle θ and roll φ (CV_32FC3): its
+// ghosts and the pedestal under them (model/pedestal.h), in fractions of the white level when the
+// model records its capture's clip level (the model's values divided by it), else in the model's
+// units.
 cv::Mat renderLight(const model::FlareModel& model, double model_angle_deg, double model_roll_deg,
                     double brightness, const cv::Vec3d& color, cv::Size image_size,
                     const model::RenderOptions& options);

@@ -98,6 +98,18 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
   ASSERT_EQ(fit.exit_code, 0) << fit.err;
   const model::FlareModel m = model::FlareModel::load(model);
   EXPECT_EQ(m.ghosts.size(), 2u);
+  // The model keeps the glow its ghosts leave (model/pedestal.h), and model-info shows its terms;
+  // --no-pedestal leaves it out.
+  ASSERT_TRUE(m.pedestal.has_value());
+  auto info = runFlarekit(
+      {"-q", "model-info", model, "--angle", std::to_string(m.pedestal->angle_min_deg), "--json"});
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_TRUE(nlohmann::json::parse(info.out)["pedestal"]["P20"].is_number()) << info.out;
+  const std::string plain = (dir / "plain.json").string();
+  auto without =
+      runFlarekit({"-q", "fit", (dir / "capture").string(), "--out", plain, "--no-pedestal"});
+  ASSERT_EQ(without.exit_code, 0) << without.err;
+  EXPECT_FALSE(model::FlareModel::load(plain).pedestal.has_value());
   ASSERT_TRUE(fs::exists(dir / "report" / "summary.json"));
   // The whole fit's time holds its parts, the model's building (polynomials, refinement) too.
   const auto summary = nlohmann::json::parse(std::ifstream(dir / "report" / "summary.json"));
