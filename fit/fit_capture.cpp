@@ -667,8 +667,8 @@ void refineTracksTogether(const std::vector<GhostTrackFit>& tracks,
 
 std::optional<model::PedestalTrack> buildPedestalTrack(
     const std::vector<double>& angles_deg, const std::vector<model::Pedestal>& pedestals,
-    int channels, int degree, double range_margin_deg, double capture_min_deg,
-    double capture_max_deg) {
+    const std::vector<double>& noise_sigma, int channels, int degree, double range_margin_deg,
+    double capture_min_deg, double capture_max_deg) {
   if (angles_deg.empty()) return std::nullopt;
   model::PedestalTrack track;
   track.angle_min_deg = std::max(
@@ -680,13 +680,14 @@ std::optional<model::PedestalTrack> buildPedestalTrack(
     std::vector<double> values;
     for (const model::Pedestal& p : pedestals) values.push_back(p.coefficients[k]);
     const std::vector<bool> in = polynomialInliers(angles_deg, values, d);
-    std::vector<double> a, v;
+    std::vector<double> a, v, w;
     for (size_t i = 0; i < angles_deg.size(); ++i)
       if (in[i]) {
         a.push_back(angles_deg[i]);
         v.push_back(values[i]);
+        w.push_back(noise_sigma[i] > 0 ? 1 / (noise_sigma[i] * noise_sigma[i]) : 1.0);
       }
-    track.terms.push_back(fitPolynomial(a, v, d));
+    track.terms.push_back(expanded(solveCentred(a, v, w, d)));
   }
   return track;
 }
@@ -1695,20 +1696,21 @@ class CaptureFitter {
     if (options_.pedestal) {
       // The model's pedestal is what the model's ghosts leave, not the fits': the polynomials
       // draw the ghosts otherwise than their fits did, and the glow makes up for it too.
-      std::vector<double> angles;
+      std::vector<double> angles, noise;
       std::vector<model::Pedestal> pedestals;
       for (const auto& [pos, level] : levels_) {
         std::vector<GhostParameters> ghosts;
         for (const auto& g : result.model.ghostsAt(angle(pos))) ghosts.push_back(g.parameters);
         angles.push_back(angle(pos));
+        noise.push_back(level.noise_sigma);
         pedestals.push_back(fitPedestal(level.image - renderedAt(level, ghosts), level.valid,
                                         stack_.size, level.factor, level.noise_sigma,
                                         options_.pedestal_fit));
       }
       levels_.clear();
       result.model.pedestal =
-          buildPedestalTrack(angles, pedestals, stack_.channels, kGlareDegree, margin, angle(0),
-                             angle(static_cast<int>(positions_.size()) - 1));
+          buildPedestalTrack(angles, pedestals, noise, stack_.channels, kGlareDegree, margin,
+                             angle(0), angle(static_cast<int>(positions_.size()) - 1));
     }
     s.ghosts = static_cast<int>(result.tracks.size());
     s.detections = detections_;

@@ -221,13 +221,14 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
                                   int joint_sweeps = 0);
 
 // The model's pedestal (model/pedestal.h) through the pedestals of frames at `angles_deg`: per
-// term, a least-squares polynomial of `degree` (fewer with fewer frames) through all but its
-// spikes (polynomialInliers), `range_margin_deg` beyond the frames within [capture_min_deg,
-// capture_max_deg] as buildFlareModel's ranges. nullopt without frames.
+// term, a polynomial of `degree` (fewer with fewer frames) through all but its spikes
+// (polynomialInliers), by least squares in σ of each frame's noise (`noise_sigma`, weights 1/σ²;
+// 0: weight 1), `range_margin_deg` beyond the frames within [capture_min_deg, capture_max_deg] as
+// buildFlareModel's ranges. nullopt without frames.
 std::optional<model::PedestalTrack> buildPedestalTrack(
     const std::vector<double>& angles_deg, const std::vector<model::Pedestal>& pedestals,
-    int channels, int degree, double range_margin_deg, double capture_min_deg,
-    double capture_max_deg);
+    const std::vector<double>& noise_sigma, int channels, int degree, double range_margin_deg,
+    double capture_min_deg, double capture_max_deg);
 
 // Tracks whose polynomials cannot follow their fits, split until they can: a track that turns
 // from glare into a sharp ghost or back (fit/cost.h isGlare) for at least min_frames fits on either

@@ -161,6 +161,37 @@ TEST(BuildFlareModel, AGlareFollowsItsPedestalOverTheCapture) {
   }
 }
 
+// The glow fades 400× over a capture (more than a degree-4 polynomial can follow everywhere):
+// fitted in σ of each frame's noise, which fades with it, the model's pedestal follows the faint
+// end too; in absolute terms the bright frames take the polynomial and the faint end is left.
+TEST(BuildPedestalTrack, FollowsTheGlowToTheCapturesFaintEnd) {
+  std::vector<double> angles, noise, unweighted, truth;
+  std::vector<model::Pedestal> pedestals;
+  for (int i = 0; i <= 60; ++i) {
+    const double theta = 0.5 * i, level = 2e-4 * std::exp(-theta / 5);
+    angles.push_back(theta);
+    truth.push_back(level);
+    noise.push_back(0.05 * level);
+    unweighted.push_back(0);
+    pedestals.push_back(model::Pedestal{1, {level, -0.5 * level, 0, -2 * level, 0, -level}});
+  }
+  // The largest error of the constant term over the last 5° (the faint end), in its frame's σ.
+  auto faint_end_error = [&](const std::vector<double>& sigma) {
+    const auto track = buildPedestalTrack(angles, pedestals, sigma, 1, kGlareDegree, 0.25, 0, 30);
+    double error = 0;
+    for (size_t i = 50; i < angles.size(); ++i)
+      error = std::max(error, std::abs(track->terms[0].evaluate(angles[i]) - truth[i]) / noise[i]);
+    return error;
+  };
+  const double weighted = faint_end_error(noise), plain = faint_end_error(unweighted);
+  EXPECT_LT(weighted, 3);  // measured 1.7 σ
+  EXPECT_GT(plain, 20);    // measured 74 σ
+  const auto track = buildPedestalTrack(angles, pedestals, noise, 1, kGlareDegree, 0.25, 0, 30);
+  EXPECT_EQ(track->angle_min_deg, 0);
+  EXPECT_EQ(track->angle_max_deg, 30);
+  EXPECT_FALSE(buildPedestalTrack({}, {}, {}, 1, kGlareDegree, 0.25, 0, 30).has_value());
+}
+
 TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
   // A ghost whose fits trade border brightness against outer fall-off from frame to frame (a
   // compact bright border in even frames, a faint wide glow in odd ones): polynomials of Ib, Fo
