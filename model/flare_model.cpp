@@ -61,29 +61,34 @@ CaptureInfo parseCapture(const ConfigNode& c) {
   return info;
 }
 
-// The first problem of a ghost track (the checks load makes after parsing), or "".
-std::string trackProblem(const GhostTrack& g, int channels, std::string* key) {
-  const int n = parameterCount(channels);
-  if (static_cast<int>(g.parameters.size()) != n) {
-    *key = "parameters";
-    return "has " + std::to_string(g.parameters.size()) + " polynomials, expected " + std::to_string(n);
+// The first problem of polynomials in θ over [angle_min_deg, angle_max_deg] named `names` under
+// `list_key` (a ghost's parameters, the pedestal's terms), or "": their count, the range, and each
+// polynomial's coefficients. `key` gets the key the problem is at.
+std::string polynomialsProblem(double angle_min_deg, double angle_max_deg,
+                               const std::vector<Polynomial>& polynomials,
+                               const std::vector<std::string>& names, const std::string& list_key,
+                               std::string* key) {
+  if (polynomials.size() != names.size()) {
+    *key = list_key;
+    return "has " + std::to_string(polynomials.size()) + " polynomials, expected " +
+           std::to_string(names.size());
   }
-  if (!std::isfinite(g.angle_min_deg)) {
+  if (!std::isfinite(angle_min_deg)) {
     *key = "angle_min_deg";
     return "must be finite";
   }
-  if (!std::isfinite(g.angle_max_deg)) {
+  if (!std::isfinite(angle_max_deg)) {
     *key = "angle_max_deg";
     return "must be finite";
   }
-  if (g.angle_max_deg < g.angle_min_deg) {
+  if (angle_max_deg < angle_min_deg) {
     *key = "angle_max_deg";
-    return "empty angle range: " + formatNumber(g.angle_max_deg) + " is below angle_min_deg " +
-           formatNumber(g.angle_min_deg);
+    return "empty angle range: " + formatNumber(angle_max_deg) + " is below angle_min_deg " +
+           formatNumber(angle_min_deg);
   }
-  for (int k = 0; k < n; ++k) {
-    const auto& c = g.parameters[k].coefficients;
-    *key = "parameters." + parameterName(k, channels);
+  for (size_t k = 0; k < names.size(); ++k) {
+    const auto& c = polynomials[k].coefficients;
+    *key = list_key + "." + names[k];
     if (c.empty()) return "needs at least one coefficient";
     if (static_cast<int>(c.size()) > kMaxPolynomialDegree + 1)
       return "has degree " + std::to_string(c.size() - 1) + ", at most " +
@@ -91,6 +96,16 @@ std::string trackProblem(const GhostTrack& g, int channels, std::string* key) {
     for (size_t i = 0; i < c.size(); ++i)
       if (!std::isfinite(c[i])) return "coefficient " + std::to_string(i) + " is not finite";
   }
+  return {};
+}
+
+// The first problem of a ghost track (the checks load makes after parsing), or "".
+std::string trackProblem(const GhostTrack& g, int channels, std::string* key) {
+  const int n = parameterCount(channels);
+  if (std::string problem = polynomialsProblem(g.angle_min_deg, g.angle_max_deg, g.parameters,
+                                               parameterNames(channels), "parameters", key);
+      !problem.empty())
+    return problem;
   // Every parameter within its allowed range across the ghost's angle range.
   for (int k = 0; k < n; ++k) {
     const ParameterBounds b = parameterBounds(k, channels);
@@ -109,37 +124,11 @@ std::string trackProblem(const GhostTrack& g, int channels, std::string* key) {
   return {};
 }
 
-// The first problem of a pedestal track, or "": like trackProblem, without bounds on the values.
+// The first problem of a pedestal track, or "": as a ghost track's, without bounds on the values
+// (the pedestal may be negative where it corrects the ghosts under it).
 std::string pedestalProblem(const PedestalTrack& p, int channels, std::string* key) {
-  const int n = kPedestalTerms * channels;
-  if (static_cast<int>(p.terms.size()) != n) {
-    *key = "terms";
-    return "has " + std::to_string(p.terms.size()) + " polynomials, expected " + std::to_string(n);
-  }
-  if (!std::isfinite(p.angle_min_deg)) {
-    *key = "angle_min_deg";
-    return "must be finite";
-  }
-  if (!std::isfinite(p.angle_max_deg)) {
-    *key = "angle_max_deg";
-    return "must be finite";
-  }
-  if (p.angle_max_deg < p.angle_min_deg) {
-    *key = "angle_max_deg";
-    return "empty angle range: " + formatNumber(p.angle_max_deg) + " is below angle_min_deg " +
-           formatNumber(p.angle_min_deg);
-  }
-  for (int k = 0; k < n; ++k) {
-    const auto& c = p.terms[k].coefficients;
-    *key = "terms." + pedestalTermName(k, channels);
-    if (c.empty()) return "needs at least one coefficient";
-    if (static_cast<int>(c.size()) > kMaxPolynomialDegree + 1)
-      return "has degree " + std::to_string(c.size() - 1) + ", at most " +
-             std::to_string(kMaxPolynomialDegree) + " is supported";
-    for (size_t i = 0; i < c.size(); ++i)
-      if (!std::isfinite(c[i])) return "coefficient " + std::to_string(i) + " is not finite";
-  }
-  return {};
+  return polynomialsProblem(p.angle_min_deg, p.angle_max_deg, p.terms, pedestalTermNames(channels),
+                            "terms", key);
 }
 
 PedestalTrack parsePedestal(const ConfigNode& node, int channels) {
