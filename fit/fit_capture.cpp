@@ -1597,14 +1597,25 @@ class CaptureFitter {
     s.degree = options_.auto_degree ? -1 : options_.degree;
     s.warnings = stack_.warnings;
     // Residual RMS per ghost and frame, against the final fits of every frame; and each frame's
-    // pedestal, fitted to what they leave.
-    std::map<int, std::vector<std::pair<int, GhostParameters>>> by_frame;
+    // pedestal, fitted to what they leave. Frames are independent: measured in parallel, each into
+    // its own slot (the light's images and the noise are known by now, so the threads only read).
+    const int frame_count = static_cast<int>(positions_.size());
+    std::vector<std::vector<std::pair<int, GhostParameters>>> by_frame(frame_count);
     for (const auto& t : tracks_)
       for (const auto& [pos, g] : t.fits) by_frame[pos].push_back({t.id, g});
-    std::map<int, std::map<int, double>> rms;  // id → pos → rms
-    for (int pos = 0; pos < static_cast<int>(positions_.size()); ++pos) {
+    for (int pos = 0; pos < frame_count; ++pos) {
+      lightOf(pos);
+      noiseOf(pos);
+    }
+    struct FrameLeft {
+      std::vector<std::pair<int, double>> rms;  // per ghost id
+      model::Pedestal pedestal;
+      std::optional<FrameData> level;  // detection's level, for the model's pedestal
+    };
+    std::vector<FrameLeft> left_of(frame_count);
+    tbb::parallel_for(0, frame_count, [&](int pos) {
       const auto& list = by_frame[pos];
-      if (list.empty() && !options_.pedestal) continue;
+      if (list.empty() && !options_.pedestal) return;
       std::vector<GhostParameters> all;
       for (const auto& [id, g] : list) all.push_back(g);
       // Against the frame without the light's image: the light is not a ghost the model failed.
@@ -1613,6 +1624,7 @@ class CaptureFitter {
       const FrameData& level = pyramid.level(kd);
       const cv::Mat left = level.image - renderedAt(level, all);
       const cv::Mat residual = luminance(left);
+      FrameLeft& out = left_of[pos];
       for (const auto& [id, g] : list) {
         const cv::Rect2d b = model::outlineBounds(g);
         const cv::Rect box = cv::Rect(cv::Rect2d(b.x / kd, b.y / kd, b.width / kd, b.height / kd)) &
@@ -1621,8 +1633,22 @@ class CaptureFitter {
         cv::Mat sq;
         cv::multiply(residual(box), residual(box), sq);
         const cv::Scalar mean = cv::mean(sq, level.valid(box));
-        rms[id][pos] = std::sqrt(mean[0]);
+        out.rms.push_back({id, std::sqrt(mean[0])});
       }
+      // The glow is smooth: detection's level samples it finely enough.
+      if (options_.pedestal) {
+        out.pedestal = fitPedestal(left, level.valid, stack_.size, kd, level.noise_sigma,
+                                   options_.pedestal_fit);
+        out.level = level;
+        out.level->edge.release();  // not needed again
+        out.level->edge_valid.release();
+      }
+    });
+    std::map<int, std::map<int, double>> rms;  // id → pos → rms
+    for (int pos = 0; pos < frame_count; ++pos) {
+      const auto& list = by_frame[pos];
+      if (list.empty() && !options_.pedestal) continue;
+      for (const auto& [id, r] : left_of[pos].rms) rms[id][pos] = r;
       FrameFit& record = frame_fits_[pos];
       record.ghost_ids.clear();
       record.ghosts.clear();
@@ -1630,14 +1656,7 @@ class CaptureFitter {
         record.ghost_ids.push_back(id);
         record.ghosts.push_back(g);
       }
-      // The glow is smooth: detection's level samples it finely enough.
-      if (options_.pedestal) {
-        record.pedestal = fitPedestal(left, level.valid, stack_.size, kd, level.noise_sigma,
-                                      options_.pedestal_fit);
-        FrameData& kept = levels_[pos] = level;
-        kept.edge.release();  // not needed again
-        kept.edge_valid.release();
-      }
+      record.pedestal = left_of[pos].pedestal;
     }
     for (const auto& t : tracks_) {
       if (static_cast<int>(t.fits.size()) < options_.tracking.min_track_frames) {
@@ -1696,18 +1715,22 @@ class CaptureFitter {
     if (options_.pedestal) {
       // The model's pedestal is what the model's ghosts leave, not the fits': the polynomials
       // draw the ghosts otherwise than their fits did, and the glow makes up for it too.
+      std::vector<int> at;  // the frames with a level kept, in order
+      for (int pos = 0; pos < frame_count; ++pos)
+        if (left_of[pos].level) at.push_back(pos);
       std::vector<double> angles, noise;
-      std::vector<model::Pedestal> pedestals;
-      for (const auto& [pos, level] : levels_) {
+      std::vector<model::Pedestal> pedestals(at.size());
+      tbb::parallel_for(size_t{0}, at.size(), [&](size_t i) {
+        const FrameData& level = *left_of[at[i]].level;
         std::vector<GhostParameters> ghosts;
-        for (const auto& g : result.model.ghostsAt(angle(pos))) ghosts.push_back(g.parameters);
+        for (const auto& g : result.model.ghostsAt(angle(at[i]))) ghosts.push_back(g.parameters);
+        pedestals[i] = fitPedestal(level.image - renderedAt(level, ghosts), level.valid, stack_.size,
+                                   level.factor, level.noise_sigma, options_.pedestal_fit);
+      });
+      for (int pos : at) {
         angles.push_back(angle(pos));
-        noise.push_back(level.noise_sigma);
-        pedestals.push_back(fitPedestal(level.image - renderedAt(level, ghosts), level.valid,
-                                        stack_.size, level.factor, level.noise_sigma,
-                                        options_.pedestal_fit));
+        noise.push_back(left_of[pos].level->noise_sigma);
       }
-      levels_.clear();
       result.model.pedestal =
           buildPedestalTrack(angles, pedestals, noise, stack_.channels, kGlareDegree, margin,
                              angle(0), angle(static_cast<int>(positions_.size()) - 1));
@@ -1729,7 +1752,6 @@ class CaptureFitter {
   std::map<int, FrameFit> frame_fits_;
   std::vector<LightImage> lights_;  // by position in the fitted frame list (lightOf)
   std::map<int, double> noise_;       // noise σ by position
-  std::map<int, FrameData> levels_;   // detection's level of each frame, for the model's pedestal
   int next_id_ = 0;
   int detections_ = 0, rejected_ = 0;
   int group_resolves_ = 0;  // groups solved again because the groups before them moved onto them
