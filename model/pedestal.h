@@ -42,7 +42,8 @@ struct Pedestal {
   std::vector<double> coefficients;  // kPedestalTerms × channels, channel-major; or empty
 
   bool empty() const { return coefficients.empty(); }
-  // P_c at capture pixel `p` (not clamped), the capture being `capture_size`.
+  // P_c at capture pixel `p`, the capture being `capture_size`: taken at the nearest point of the
+  // capture's frame, and not clamped at 0 (it may be negative).
   double at(cv::Point2d p, cv::Size capture_size, int channel) const;
   // Adds the pedestal to `image` (CV_32FC(channels): the ghosts' image), whose pixel centres map
   // to the capture's pixels through `view` (modelFromImage) as renderGhosts maps them, and clamps
