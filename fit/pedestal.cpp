@@ -61,15 +61,21 @@ model::Pedestal fitPedestal(const cv::Mat& residual, const cv::Mat& valid, cv::S
     }
     cv::Vec<double, kTerms> b = cv::Vec<double, kTerms>::all(0);
     for (int it = 0; it < (robust ? options.iterations : 1); ++it) {
+      // The normal equations, symmetric: their upper triangle summed, over the samples that count
+      // (this sum is most of a fit's time).
       cv::Matx<double, kTerms, kTerms> normal = cv::Matx<double, kTerms, kTerms>::zeros();
       cv::Vec<double, kTerms> right = cv::Vec<double, kTerms>::all(0);
       for (size_t i = 0; i < samples.size(); ++i) {
+        if (w[i] == 0) continue;
         const auto& t = samples[i].terms;
         for (int a = 0; a < kTerms; ++a) {
-          right[a] += w[i] * t[a] * r[i];
-          for (int d = 0; d < kTerms; ++d) normal(a, d) += w[i] * t[a] * t[d];
+          const double wt = w[i] * t[a];
+          right[a] += wt * r[i];
+          for (int d = a; d < kTerms; ++d) normal(a, d) += wt * t[d];
         }
       }
+      for (int a = 1; a < kTerms; ++a)
+        for (int d = 0; d < a; ++d) normal(a, d) = normal(d, a);
       cv::solve(normal, right, b, cv::DECOMP_SVD);
       if (!robust) break;
       for (size_t i = 0; i < samples.size(); ++i) {
