@@ -1732,7 +1732,7 @@ class CaptureFitter {
         noise.push_back(left_of[pos].level->noise_sigma);
       }
       result.model.pedestal =
-          buildPedestalTrack(angles, pedestals, noise, stack_.channels, kGlareDegree, margin,
+          buildPedestalTrack(angles, pedestals, noise, stack_.channels, kPedestalDegree, margin,
                              angle(0), angle(static_cast<int>(positions_.size()) - 1));
     }
     s.ghosts = static_cast<int>(result.tracks.size());

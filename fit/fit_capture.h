@@ -120,6 +120,8 @@ struct FitOptions {
   // 0.2°), means over λ × 0.98, 0.99, 1, 1.01, 1.02 of the median PSNR, without → with:
   //   Heliar Tronnier: model 25.1 → 25.4 dB, the frames' fits 28.8 → 29.6 dB;
   //   Brendel Tessar:  model 26.2 → 26.6 dB, the frames' fits 28.3 → 29.2 dB.
+  // (The model's pedestal polynomials then of degree 4; of degree 8, kPedestalDegree, on captures
+  // simulated afresh on another machine: Heliar 25.3 → 25.8 dB, Tessar 27.2 → 27.5 dB.)
   // Fitted inside the sweeps instead, so that the ghosts were fitted on the frame without it, it
   // took part of the large veils not found yet and detection lost them (fit/evaluation.h
   // CeilingOptions::quadratic_pedestal).
@@ -208,6 +210,14 @@ std::vector<bool> polynomialInliers(const std::vector<double>& angles_deg,
 // The least degree of a glare's polynomials (fit/cost.h isGlare): its one track spans the
 // capture, and its pedestal falls 20× over 0–30° on the 640×427 captures (buildFlareModel).
 inline constexpr int kGlareDegree = 4;
+
+// The degree of the model's pedestal polynomials (buildPedestalTrack). Its one track spans the
+// capture and each term follows the glow of every frame, which a low degree leaves behind. On the
+// 640×427 captures, λ × 1, model median PSNR with degree 2 / 4 / 6 / 8: Heliar Tronnier 25.3 /
+// 25.5 / 26.0 / 26.2 dB, Brendel Tessar 28.3 / 28.6 / 28.8 / 28.9 dB; held out (--holdout odd),
+// degree 4 / 8: 25.7 / 25.9 and 27.7 / 27.7 dB. Degree 8 over λ × 0.98–1.02: Heliar higher at
+// every λ (+0.3 to +1.0 dB), Tessar at four and the same at one (0 to +0.9 dB).
+inline constexpr int kPedestalDegree = 8;
 
 // The flare model from the tracks: one GhostTrack per track, each parameter a polynomial of the
 // given degree (or auto 1–4 by held-out error when degree < 0; a glare's at least kGlareDegree)

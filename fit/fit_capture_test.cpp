@@ -164,7 +164,9 @@ TEST(BuildFlareModel, AGlareFollowsItsPedestalOverTheCapture) {
 // The glow fades 400× over a capture (more than a degree-4 polynomial can follow everywhere):
 // fitted in σ of each frame's noise, which fades with it, the model's pedestal follows the faint
 // end too; in absolute terms the bright frames take the polynomial and the faint end is left.
+// (Degree 4, below kPedestalDegree, so that the weights matter.)
 TEST(BuildPedestalTrack, FollowsTheGlowToTheCapturesFaintEnd) {
+  constexpr int kDegree = 4;
   std::vector<double> angles, noise, unweighted, truth;
   std::vector<model::Pedestal> pedestals;
   for (int i = 0; i <= 60; ++i) {
@@ -177,7 +179,7 @@ TEST(BuildPedestalTrack, FollowsTheGlowToTheCapturesFaintEnd) {
   }
   // The largest error of the constant term over the last 5° (the faint end), in its frame's σ.
   auto faint_end_error = [&](const std::vector<double>& sigma) {
-    const auto track = buildPedestalTrack(angles, pedestals, sigma, 1, kGlareDegree, 0.25, 0, 30);
+    const auto track = buildPedestalTrack(angles, pedestals, sigma, 1, kDegree, 0.25, 0, 30);
     double error = 0;
     for (size_t i = 50; i < angles.size(); ++i)
       error = std::max(error, std::abs(track->terms[0].evaluate(angles[i]) - truth[i]) / noise[i]);
@@ -186,10 +188,10 @@ TEST(BuildPedestalTrack, FollowsTheGlowToTheCapturesFaintEnd) {
   const double weighted = faint_end_error(noise), plain = faint_end_error(unweighted);
   EXPECT_LT(weighted, 3);  // measured 1.7 σ
   EXPECT_GT(plain, 20);    // measured 74 σ
-  const auto track = buildPedestalTrack(angles, pedestals, noise, 1, kGlareDegree, 0.25, 0, 30);
+  const auto track = buildPedestalTrack(angles, pedestals, noise, 1, kDegree, 0.25, 0, 30);
   EXPECT_EQ(track->angle_min_deg, 0);
   EXPECT_EQ(track->angle_max_deg, 30);
-  EXPECT_FALSE(buildPedestalTrack({}, {}, {}, 1, kGlareDegree, 0.25, 0, 30).has_value());
+  EXPECT_FALSE(buildPedestalTrack({}, {}, {}, 1, kDegree, 0.25, 0, 30).has_value());
 }
 
 TEST(BuildFlareModel, TheModelCarriesEachFrameFitsBrightness) {
