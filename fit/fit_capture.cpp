@@ -222,6 +222,33 @@ bool polynomialWithinBounds(const model::Polynomial& p, int index, int channels,
   return polynomialWithinBounds(p, model::parameterBounds(index, channels), lo, hi);
 }
 
+// The bounds of a track's model: the model's own, with its Ib and Ii at most
+// kTrackIntensityBound × the brightest Ib or Ii of the track's fits. Where a ghost's inside
+// fall-off Fi runs far deeper than its outline (a small piece of a caustic, fits held at Fi's and
+// Ei's bounds), its image shows only (Ii − Ib)·(depth / Fi)^Ei inside, and the image-space solves
+// (fitIntensitiesInImage, refineTrackInImage) took Ii anywhere along that product: Brendel Tessar
+// 640×427, λ × 1, track 39 at 3.6–6.8°, fits' Ii 0.0031, the model's 5.4e18 (test
+// BuildFlareModel.AGhostWhoseInsideFallOffRunsBeyondItsOutlineKeepsItsFitsBrightness). Over
+// λ × 0.98–1.02 on the 640×427 captures, 33 ghosts of the ten models ran brighter than 10 × their
+// fits' brightest (up to 1.7e21 ×); bounded, none (at most 3.9 ×). Means over the five λ, recall %
+// / precision % / median PSNR dB / median centroid error px (bench/fit_accuracy.sh), unbounded →
+// bounded: Heliar 74.7 / 81.5 / 25.9 / 7.1 → 74.1 / 81.3 / 25.9 / 7.0, Tessar 77.2 / 59.5 / 26.8
+// / 10.9 → 77.2 / 59.5 / 26.8 / 10.8.
+constexpr double kTrackIntensityBound = 4;
+std::vector<model::ParameterBounds> trackBounds(const GhostTrackFit& t, int channels) {
+  std::vector<model::ParameterBounds> bounds;
+  for (int k = 0; k < model::parameterCount(channels); ++k) bounds.push_back(model::parameterBounds(k, channels));
+  double brightest = 0;
+  for (const GhostParameters& f : t.fits)
+    for (int c = 0; c < f.channels; ++c) brightest = std::max({brightest, f.border[c], f.inside[c]});
+  if (brightest > 0) {
+    const model::ParameterLayout layout{channels};
+    for (int c = 0; c < channels; ++c)
+      bounds[layout.ib(c)].upper = bounds[layout.ii(c)].upper = kTrackIntensityBound * brightest;
+  }
+  return bounds;
+}
+
 int autoDegree(const std::vector<double>& a, const std::vector<double>& v) {
   // Held-out error: fit on every other frame, measure on the rest (and the other way round).
   int best = 1;
@@ -325,6 +352,7 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
     images.push_back(std::move(f));
   }
   const model::ParameterLayout layout{channels};
+  const std::vector<model::ParameterBounds> bounds = trackBounds(t, channels);
   constexpr double kEnergyWeight = 10;
   for (int d = std::min(degree, static_cast<int>(frames.size()) - 1); d >= 0; --d) {
     // Unknowns: a_k of Ib and b_k of Ii in the centred variable, the same for every channel's
@@ -380,8 +408,8 @@ bool fitIntensitiesInImage(const GhostTrackFit& t, const std::vector<bool>& use,
       pi.a = solution.col(c).tail(d + 1);
       border[c] = expanded(pb);
       inside[c] = expanded(pi);
-      within = polynomialWithinBounds(border[c], layout.ib(c), channels, g.angle_min_deg, g.angle_max_deg) &&
-               polynomialWithinBounds(inside[c], layout.ii(c), channels, g.angle_min_deg, g.angle_max_deg);
+      within = polynomialWithinBounds(border[c], bounds[layout.ib(c)], g.angle_min_deg, g.angle_max_deg) &&
+               polynomialWithinBounds(inside[c], bounds[layout.ii(c)], g.angle_min_deg, g.angle_max_deg);
     }
     if (!within) continue;
     for (int c = 0; c < channels; ++c) {
@@ -451,8 +479,7 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
   // every λ (by 0.2–0.6 dB): the light the softened ghosts drew that no fit holds. Held within
   // all of the fits' fitBounds (the centre, sizes and Fi too), the same five λ gave the same:
   // Heliar 75.3 / 82.2 / 25.0 / 7.2, Tessar 77.8 / 60.1 / 25.2 / 11.1.
-  std::vector<model::ParameterBounds> bounds;
-  for (int k = 0; k < count; ++k) bounds.push_back(model::parameterBounds(k, channels));
+  std::vector<model::ParameterBounds> bounds = trackBounds(t, channels);
   const cv::Size image = level.image_size;
   if (std::none_of(t.fits.begin(), t.fits.end(), [&](const GhostParameters& f) { return isGlare(f, image); })) {
     const int fo = model::ParameterLayout{channels}.fo();
@@ -538,7 +565,8 @@ void refineTrackInImage(const GhostTrackFit& t, const ImageLevel& level, int cha
   double cost = evaluate(g, &jtj, &jtr), mu = 1e-3;
   // Parameters held where they are: a step that took their polynomial out of bounds (a constant
   // at a bound, a fall-off against the diagonal) is solved again without them. Only the model's
-  // bounds: the refinement also takes parameters where the image hardly tells them apart (a
+  // bounds (and trackBounds's on Ib and Ii): the refinement also takes parameters where the image
+  // hardly tells them apart (a
   // glare's centre 2800 px off the frame, Fi 20–90× deeper than the outline with Ii to match),
   // but held within the range of the track's fits (plus half of it), the model's median PSNR fell
   // (640×427 captures, λ × 1, Heliar / Tessar: 25.6 / 25.7 → 25.3 / 25.3 dB; held out 24.6 / 23.0

@@ -285,6 +285,49 @@ TEST(BuildFlareModel, RefinedInImageTheModelDrawsWhatTheFitsDraw) {
   EXPECT_LT(plain_worst, 30);
 }
 
+TEST(BuildFlareModel, AGhostWhoseInsideFallOffRunsBeyondItsOutlineKeepsItsFitsBrightness) {
+  // A small ghost whose fits hold its inside fall-off Fi and exponent Ei at their bounds, far
+  // deeper than its outline (Brendel Tessar 640×427, λ × 1, track 39 at 3.6–6.8°: L 0.8–3 px,
+  // R 7–4.8 px, h 6 px, Fi 769 px, Ei 10, Ii 0.0031). Its image shows only Ib and
+  // (Ii − Ib)·(depth / Fi)^Ei ≈ 0 inside, so Ii itself is not seen, and the image-space solves
+  // took the model's Ii to 5.4e18. The model's Ib and Ii at every fitted angle must stay within
+  // 4 × the brightest of the fits' (their bound), and its image within 30 dB of each fit's.
+  GhostTrackFit t;
+  t.id = 3;
+  for (int i = 0; i < 17; ++i) {
+    model::GhostParameters g;
+    g.center_x = 90 + i;
+    g.center_y = 60;
+    g.left = 0.8 + 0.14 * i;
+    g.right = 7 - 0.14 * i;
+    g.height = 6;
+    g.border = {2e-5 - 6e-7 * i, 0, 0};
+    g.inside = {0.0031, 0, 0};
+    g.inside_falloff = 769;
+    g.inside_exponent = 10;
+    g.outside_falloff = 17 + 0.6 * i;
+    g.outside_exponent = 0.7 + 0.3 * i;
+    addFrame(t, 0.2 * i, g);
+  }
+  const model::CaptureInfo info = testCapture();
+  const model::FlareModel m = buildFlareModel({t}, info, 1, 2, 0, -90, 90, true);
+  std::string error;
+  ASSERT_TRUE(m.IsValid(&error)) << error;
+  for (size_t i = 0; i < t.fits.size(); ++i) {
+    const auto at = m.ghostsAt(t.angles_deg[i]);
+    ASSERT_EQ(at.size(), 1u);
+    const model::GhostParameters& g = at[0].parameters;
+    EXPECT_LE(g.inside[0], 4 * 0.0031 * (1 + 1e-9)) << "at " << t.angles_deg[i] << "°";
+    EXPECT_LE(g.border[0], 4 * 0.0031 * (1 + 1e-9)) << "at " << t.angles_deg[i] << "°";
+    const cv::Mat fit = model::renderGhosts(std::span(&t.fits[i], 1), info.image_size, 1);
+    const cv::Mat model_image = model::renderGhosts(std::span(&g, 1), info.image_size, 1);
+    double peak = 0;
+    cv::minMaxLoc(fit, nullptr, &peak);
+    const cv::Mat d = model_image - fit;
+    EXPECT_GE(10 * std::log10(peak * peak * d.total() / d.dot(d)), 30) << "at " << t.angles_deg[i] << "°";
+  }
+}
+
 TEST(BuildFlareModel, RefinedInImageAVeilKeepsTheAxisItsFitsFound) {
   // The fits of a frame-wide veil (Heliar Tronnier 640×427, λ × 1, track 30 at 6.8–13.2°, 33
   // frames, tests/data/fit/heliar640_veil_fits.json): its top and bottom lie beyond the frame
