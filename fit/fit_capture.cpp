@@ -233,7 +233,12 @@ bool polynomialWithinBounds(const model::Polynomial& p, int index, int channels,
 // fits' brightest (up to 1.7e21 ×); bounded, none (at most 3.9 ×). Means over the five λ, recall %
 // / precision % / median PSNR dB / median centroid error px (bench/fit_accuracy.sh), unbounded →
 // bounded: Heliar 74.7 / 81.5 / 25.9 / 7.1 → 74.1 / 81.3 / 25.9 / 7.0, Tessar 77.2 / 59.5 / 26.8
-// / 10.9 → 77.2 / 59.5 / 26.8 / 10.8.
+// / 10.9 → 77.2 / 59.5 / 26.8 / 10.8; held out (--holdout odd), Heliar 80.5 / 78.2 / 24.9 / 8.1
+// → 77.8 / 76.6 / 24.9 / 7.8 (recall lower at every λ, by 0.7–6.9 points: ghosts moved by their
+// neighbours' change in the joint sweeps), Tessar 74.4 / 62.9 / 26.1 / 13.2 → 74.0 / 63.2 / 26.2 /
+// 12.8, and held-out frames below 10 dB 9 → 6. Bounded, a refinement can still trade Fi for the
+// Ii it may not take (Tessar λ × 0.98 held out, 2.2°: a ghost's Fi 503 → 63 px at Ii 0.62 →
+// 0.14, its middle 170 × brighter, the frame at −24.3 dB).
 constexpr double kTrackIntensityBound = 4;
 std::vector<model::ParameterBounds> trackBounds(const GhostTrackFit& t, int channels) {
   std::vector<model::ParameterBounds> bounds;
