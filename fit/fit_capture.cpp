@@ -696,6 +696,82 @@ void refineTracksTogether(const std::vector<GhostTrackFit>& tracks,
   }
 }
 
+// A track's ghost with each parameter a polynomial through its fits: buildFlareModel's first
+// step, before the intensities are solved in image space (which the outline does not depend on).
+struct PolynomialGhost {
+  model::GhostTrack ghost;
+  std::vector<bool> image_inliers;  // the fits in which no parameter is a spike
+  int intensity_degree = 0;         // the highest degree of Ib's and Ii's polynomials
+};
+
+PolynomialGhost polynomialsThroughFits(const GhostTrackFit& t, cv::Size image_size, int channels,
+                                       int degree, double range_margin_deg, double capture_min_deg,
+                                       double capture_max_deg) {
+  PolynomialGhost out;
+  model::GhostTrack& g = out.ghost;
+  std::vector<bool>& image_inliers = out.image_inliers;
+  g.id = t.id;
+  g.angle_min_deg = std::max(capture_min_deg, std::min(t.angles_deg.front(), t.angles_deg.front() - range_margin_deg));
+  g.angle_max_deg = std::min(capture_max_deg, std::max(t.angles_deg.back(), t.angles_deg.back() + range_margin_deg));
+  const int count = model::parameterCount(channels);
+  const model::ParameterLayout layout{channels};
+  // Frames where no parameter is a spike: only there can the model's ghost be compared with the
+  // fit in image space (fitIntensitiesInImage). With the intensities' spikes alone left out, a
+  // frame fitted with half its outline hidden in the light's core (L 3 px instead of 14) set the
+  // model's Ib at the track's end to 0.45 where every fit had 0.8.
+  image_inliers.assign(t.fits.size(), true);
+  // Veiling glare spans the capture (fit/cost.h isGlare: one track of all 151 frames on the
+  // 640×427 captures), and its pedestal falls 20× over 0–30° (Tessar λ × 1: the fits' Ii
+  // 1.7e-4 → 8.2e-6), which a parabola does not follow: at 30° its model drew 2× the fits'
+  // pedestal over the whole frame, 20 dB against the fits' 31 (test
+  // BuildFlareModel.AGlareFollowsItsPedestalOverTheCapture). Its polynomials take at least
+  // kGlareDegree. Means over λ × 0.98–1.02 (recall % / precision % / median PSNR dB / median
+  // centroid error px, bench/fit_accuracy.sh), degree 2 → 4: Heliar 74.9 / 81.6 / 25.1 / 6.9 →
+  // 74.7 / 81.5 / 25.1 / 7.1, Tessar 78.3 / 60.4 / 25.2 / 11.3 → 77.2 / 59.5 / 26.2 / 10.9, the
+  // Tessar's PSNR higher at every λ (by 0.5–1.6 dB); held out (--holdout odd), Heliar 81.0 /
+  // 78.5 / 24.6 / 7.2 → 80.5 / 78.2 / 24.6 / 8.1, Tessar 74.1 / 63.1 / 24.5 / 12.4 → 74.3 / 62.9 /
+  // 25.2 / 13.2. The frames' fits are the same.
+  const bool glare = std::all_of(t.fits.begin(), t.fits.end(),
+                                 [&](const GhostParameters& f) { return isGlare(f, image_size); });
+  const int ghost_degree = glare && degree >= 0 ? std::max(degree, kGlareDegree) : degree;
+  for (int k = 0; k < count; ++k) {
+    std::vector<double> all;
+    for (const auto& f : t.fits) all.push_back(model::toParameterVector(f)[k]);
+    // Frames where the fit jumped away from its neighbours for a frame (into the light or a
+    // neighbouring ghost) are left out: one Heliar frame's Ii 700× its neighbours' set a
+    // ghost's brightness over its whole range.
+    const std::vector<bool> inlier =
+        polynomialInliers(t.angles_deg, all, ghost_degree < 0 ? 2 : ghost_degree);
+    std::vector<double> a, v;
+    for (size_t i = 0; i < all.size(); ++i)
+      if (inlier[i]) {
+        a.push_back(t.angles_deg[i]);
+        v.push_back(all[i]);
+      }
+    int d = ghost_degree < 0 ? autoDegree(a, v) : ghost_degree;
+    model::Polynomial p = fitPolynomial(a, v, d);
+    // Lower the degree until the polynomial stays within the parameter's bounds over the
+    // range (degree 0, a constant clamped into them, always does).
+    while (!polynomialWithinBounds(p, k, channels, g.angle_min_deg, g.angle_max_deg) && d > 0)
+      p = fitPolynomial(a, v, --d);
+    if (d == 0) {
+      // The constant is the median: a short track too wild for a curve (three Heliar frames
+      // with Ib 8e-5, 0.0075 and 0.043 and fall-offs of 332, 3 and 18 px) is not summarised
+      // by a mean that pairs the brightest border with the widest glow.
+      // A constant at a bound (fits that ran into it) is moved a hair inside, where the model
+      // file's check accepts it whatever its rounding.
+      const auto b = model::parameterBounds(k, channels);
+      const double lo = b.lower + 1e-6 * std::max(1.0, std::abs(b.lower));
+      const double hi = b.upper >= model::kUnbounded ? b.upper : b.upper - 1e-6 * std::max(1.0, std::abs(b.upper));
+      p.coefficients = {std::clamp(medianOf(v), lo, hi)};
+    }
+    g.parameters.push_back(p);
+    if (k >= layout.ib(0) && k < layout.fi()) out.intensity_degree = std::max(out.intensity_degree, d);
+    for (size_t i = 0; i < inlier.size(); ++i) image_inliers[i] = image_inliers[i] && inlier[i];
+  }
+  return out;
+}
+
 }  // namespace
 
 std::optional<model::PedestalTrack> buildPedestalTrack(
@@ -755,68 +831,11 @@ model::FlareModel buildFlareModel(const std::vector<GhostTrackFit>& tracks,
   m.ghosts.resize(tracks.size());
   tbb::parallel_for(size_t{0}, tracks.size(), [&](size_t track_index) {
     const GhostTrackFit& t = tracks[track_index];
+    PolynomialGhost p = polynomialsThroughFits(t, info.image_size, channels, degree, range_margin_deg,
+                                               capture_min_deg, capture_max_deg);
     model::GhostTrack& g = m.ghosts[track_index];
-    g.id = t.id;
-    g.angle_min_deg = std::max(capture_min_deg, std::min(t.angles_deg.front(), t.angles_deg.front() - range_margin_deg));
-    g.angle_max_deg = std::min(capture_max_deg, std::max(t.angles_deg.back(), t.angles_deg.back() + range_margin_deg));
-    const int count = model::parameterCount(channels);
-    const model::ParameterLayout layout{channels};
-    // Frames where no parameter is a spike: only there can the model's ghost be compared with the
-    // fit in image space (fitIntensitiesInImage). With the intensities' spikes alone left out, a
-    // frame fitted with half its outline hidden in the light's core (L 3 px instead of 14) set the
-    // model's Ib at the track's end to 0.45 where every fit had 0.8.
-    std::vector<bool> image_inliers(t.fits.size(), true);
-    int intensity_degree = 0;
-    // Veiling glare spans the capture (fit/cost.h isGlare: one track of all 151 frames on the
-    // 640×427 captures), and its pedestal falls 20× over 0–30° (Tessar λ × 1: the fits' Ii
-    // 1.7e-4 → 8.2e-6), which a parabola does not follow: at 30° its model drew 2× the fits'
-    // pedestal over the whole frame, 20 dB against the fits' 31 (test
-    // BuildFlareModel.AGlareFollowsItsPedestalOverTheCapture). Its polynomials take at least
-    // kGlareDegree. Means over λ × 0.98–1.02 (recall % / precision % / median PSNR dB / median
-    // centroid error px, bench/fit_accuracy.sh), degree 2 → 4: Heliar 74.9 / 81.6 / 25.1 / 6.9 →
-    // 74.7 / 81.5 / 25.1 / 7.1, Tessar 78.3 / 60.4 / 25.2 / 11.3 → 77.2 / 59.5 / 26.2 / 10.9, the
-    // Tessar's PSNR higher at every λ (by 0.5–1.6 dB); held out (--holdout odd), Heliar 81.0 /
-    // 78.5 / 24.6 / 7.2 → 80.5 / 78.2 / 24.6 / 8.1, Tessar 74.1 / 63.1 / 24.5 / 12.4 → 74.3 / 62.9 /
-    // 25.2 / 13.2. The frames' fits are the same.
-    const bool glare = std::all_of(t.fits.begin(), t.fits.end(),
-                                   [&](const GhostParameters& f) { return isGlare(f, info.image_size); });
-    const int ghost_degree = glare && degree >= 0 ? std::max(degree, kGlareDegree) : degree;
-    for (int k = 0; k < count; ++k) {
-      std::vector<double> all;
-      for (const auto& f : t.fits) all.push_back(model::toParameterVector(f)[k]);
-      // Frames where the fit jumped away from its neighbours for a frame (into the light or a
-      // neighbouring ghost) are left out: one Heliar frame's Ii 700× its neighbours' set a
-      // ghost's brightness over its whole range.
-      const std::vector<bool> inlier =
-          polynomialInliers(t.angles_deg, all, ghost_degree < 0 ? 2 : ghost_degree);
-      std::vector<double> a, v;
-      for (size_t i = 0; i < all.size(); ++i)
-        if (inlier[i]) {
-          a.push_back(t.angles_deg[i]);
-          v.push_back(all[i]);
-        }
-      int d = ghost_degree < 0 ? autoDegree(a, v) : ghost_degree;
-      model::Polynomial p = fitPolynomial(a, v, d);
-      // Lower the degree until the polynomial stays within the parameter's bounds over the
-      // range (degree 0, a constant clamped into them, always does).
-      while (!polynomialWithinBounds(p, k, channels, g.angle_min_deg, g.angle_max_deg) && d > 0)
-        p = fitPolynomial(a, v, --d);
-      if (d == 0) {
-        // The constant is the median: a short track too wild for a curve (three Heliar frames
-        // with Ib 8e-5, 0.0075 and 0.043 and fall-offs of 332, 3 and 18 px) is not summarised
-        // by a mean that pairs the brightest border with the widest glow.
-        // A constant at a bound (fits that ran into it) is moved a hair inside, where the model
-        // file's check accepts it whatever its rounding.
-        const auto b = model::parameterBounds(k, channels);
-        const double lo = b.lower + 1e-6 * std::max(1.0, std::abs(b.lower));
-        const double hi = b.upper >= model::kUnbounded ? b.upper : b.upper - 1e-6 * std::max(1.0, std::abs(b.upper));
-        p.coefficients = {std::clamp(medianOf(v), lo, hi)};
-      }
-      g.parameters.push_back(p);
-      if (k >= layout.ib(0) && k < layout.fi()) intensity_degree = std::max(intensity_degree, d);
-      for (size_t i = 0; i < inlier.size(); ++i) image_inliers[i] = image_inliers[i] && inlier[i];
-    }
-    fitIntensitiesInImage(t, image_inliers, info.image_size, channels, intensity_degree, g);
+    g = std::move(p.ghost);
+    fitIntensitiesInImage(t, p.image_inliers, info.image_size, channels, p.intensity_degree, g);
     if (refine_in_image) refineTrackInImage(t, refine_level, channels, fit_images[track_index], frame_peaks, g);
   });
   if (refine_in_image && joint_sweeps > 0)
@@ -854,12 +873,14 @@ int polynomialsLoseTrack(const GhostTrackFit& t, const model::CaptureInfo& info,
                          int degree, int min_frames) {
   constexpr double kSameGhostIoU = 0.5;
   const int n = static_cast<int>(t.fits.size());
-  const model::FlareModel m = buildFlareModel({t}, info, channels, degree);
+  // The outline only, which buildFlareModel's intensities in image space do not move. Solved
+  // for every track, one after another, they took 2.1 s of the Tessar 640×427 fit's modelling step
+  // (λ × 1: 14.8 → 12.7 s, the model the same bit for bit).
+  const model::GhostTrack g =
+      polynomialsThroughFits(t, info.image_size, channels, degree, 0, -90, 90).ghost;
   bool follows = true;
-  for (int i = 0; i < n && follows; ++i) {
-    const auto at = m.ghostsAt(t.angles_deg[i]);
-    follows = !at.empty() && outlineIoU(at[0].parameters, t.fits[i]) >= kSameGhostIoU;
-  }
+  for (int i = 0; i < n && follows; ++i)
+    follows = outlineIoU(g.at(t.angles_deg[i], channels), t.fits[i]) >= kSameGhostIoU;
   if (follows) return 0;
   int split = min_frames;
   double worst = 2;
