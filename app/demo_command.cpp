@@ -13,7 +13,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "common/shipped_file.h"
-#include "fit/fit_capture.h"
+#include "fit/flare_fitter.h"
 #include "fit/frames.h"
 #include "model/flare_model.h"
 #include "predict/prediction.h"
@@ -71,7 +71,7 @@ void registerDemoCommand(CLI::App& app) {
     // 2. Fit every ghost and its polynomials (§3.3).
     logInfo("2/3 fit: " + capture_dir.string() + " -> " + model_file.string());
     const fit::FrameStack stack = fit::loadCapture(capture_dir);
-    const fit::FitResult fitted = fit::fitCapture(stack, fit::FitOptions{});
+    const fit::FitResult fitted = fit::fitFlare(stack, fit::FlareFitterOptions{});
     fitted.model.save(model_file);
     logInfo(fitted.summary.BriefReport());
 

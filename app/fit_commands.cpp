@@ -13,7 +13,7 @@
 #include "common/image.h"
 #include "common/log.h"
 #include "fit/evaluation.h"
-#include "fit/fit_capture.h"
+#include "fit/flare_fitter.h"
 #include "fit/frames.h"
 #include "fit/optimizer_bench.h"
 #include "fit/report.h"
@@ -68,85 +68,88 @@ fit::FrameStack loadStack(const StackArgs& a) {
 void registerFit(CLI::App& app) {
   struct Options {
     StackArgs stack;
-    std::string out, optimizer = "ceres", degree = "2", holdout, report;
-    int threads = 2, joint_sweeps = -1;
-    double edge_weight = -1, shape_prior = -1;
-    bool light_symmetry = true, veils = false, glare = true, pedestal = true, pixel_noise = true;
+    std::string out, optimizer = "ceres", holdout, report;
+    int threads = 2, frame_stride = 1;
+    double edge_weight = -1;
+    bool refine = true, pedestal = true;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
-      "fit", "Fit a model of every ghost to a capture (Walch et al. 2018 §3.3): detection, tracking, "
-             "per-frame fits, polynomials per parameter; writes model.json");
+      "fit", "Fit a model of every ghost to a capture: ghosts found once in the sweep image, fitted in "
+             "every frame, polynomials refined against the frames (docs/fitting.md); writes model.json");
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder (manifest.json), or EXR files / folders")
       ->required();
   cmd->add_option("--out", o->out, "Model file to write (model.json)")->required();
-  cmd->add_option("--optimizer", o->optimizer, "ceres (Levenberg–Marquardt, default) or walch-gd (the paper's gradient descent)");
-  cmd->add_option("--degree", o->degree,
-                  "Polynomial degree per parameter, or auto (1–4 by held-out error); default 2 (the glare, "
-                  "which spans the capture, at least 4)");
+  cmd->add_option("--optimizer", o->optimizer,
+                  "Frame fits: ceres (Levenberg–Marquardt, default) or walch-gd (the paper's gradient descent)");
   cmd->add_option("--holdout", o->holdout, "odd: fit on every other frame only (evaluate the others with fit-eval --frames odd)");
-  cmd->add_option("--report", o->report, "Folder for per-ghost tracks, residuals, contact sheets and the frames' own fits (frame_fits.json)");
+  cmd->add_option("--report", o->report,
+                  "Folder for the summary, the sweep picture, each ghost's frame fits and contact sheets");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   cmd->add_option("--edge-weight", o->edge_weight, "λ, the edge term's weight (default 1)");
-  cmd->add_option("--shape-prior", o->shape_prior,
-                  "σ of the prior that holds unseen parts of a ghost's outline at its seed, as a fraction of its size (default 1; 0 = off)");
-  cmd->add_option(
-      "--joint-sweeps", o->joint_sweeps,
-      "Sweeps that refine all ghosts' polynomials together towards each frame's fits (default 2; "
-      "0 = each ghost towards its own fits only, faster)");
-  cmd->add_flag("--light-symmetry,!--no-light-symmetry", o->light_symmetry,
-                "Separate the light's own image by its point symmetry (default), or keep out of the light's zone");
-  cmd->add_flag("--veils", o->veils,
-                "Also seed veils that fill the frame from steps of the residual along the flare axis "
-                "(off by default: more ghosts found, a less stable physics ranking; fit/detection.h)");
-  cmd->add_flag("--glare,!--no-glare", o->glare,
-                "Seed veiling glare, the pedestal many faint veils wider than the frame sum to, as "
-                "a ghost of its own flat over the frame (default), so the ghosts keep sharp "
-                "outlines (fit/cost.h isGlare)");
-  cmd->add_flag(
-      "--pedestal,!--no-pedestal", o->pedestal,
-      "Fit each frame's pedestal, the smooth glow the ghosts leave, as a quadratic over the "
-      "frame once the tracks stand (default), and keep it in the model (model/pedestal.h)");
-  cmd->add_flag(
-      "--pixel-noise,!--no-pixel-noise", o->pixel_noise,
-      "Count thresholds in σ of the frame's pixel noise (default), or in the background's spread "
-      "(fewer ghosts found, more of the model's ghosts true; fit/fit_capture.h)");
+  cmd->add_option("--frame-stride", o->frame_stride, "Fit every n-th frame one by one (default 1)");
+  cmd->add_flag("--refine,!--no-refine", o->refine,
+                "Refine the polynomials against the frames themselves (default)");
+  cmd->add_flag("--pedestal,!--no-pedestal", o->pedestal,
+                "Fit the pedestal, the smooth glow of veils wider than the frame (default)");
   addStackOptions(cmd, o->stack);
   cmd->callback([o] {
-    fit::FitOptions options;
-    options.solver.optimizer = fit::parseOptimizer(o->optimizer);
-    if (o->degree == "auto") {
-      options.auto_degree = true;
-    } else {
-      try {
-        size_t used = 0;
-        options.degree = std::stoi(o->degree, &used);
-        if (used != o->degree.size()) throw std::invalid_argument("");
-      } catch (const std::exception&) {
-        throw InputError("--degree: expected a number or auto, got \"" + o->degree + "\"");
-      }
-    }
+    fit::FlareFitterOptions options;
+    options.frame_fit.solver.optimizer = fit::parseOptimizer(o->optimizer);
     if (!o->holdout.empty() && o->holdout != "odd") throw InputError("--holdout: only \"odd\" is supported");
     options.holdout_odd = o->holdout == "odd";
     options.threads = o->threads;
-    if (o->edge_weight >= 0) options.cost.edge_weight = o->edge_weight;
-    if (o->shape_prior >= 0) options.cost.prior_fraction = o->shape_prior;
-    if (o->joint_sweeps >= 0) options.joint_refine_sweeps = o->joint_sweeps;
-    options.detection.light_symmetry = o->light_symmetry;
-    options.detection.find_veils = o->veils;
-    options.detection.find_glare = o->glare;
-    options.pedestal = o->pedestal;
-    options.pixel_noise = o->pixel_noise;
+    options.frame_stride = o->frame_stride;
+    if (o->edge_weight >= 0) {
+      options.frame_fit.cost.edge_weight = o->edge_weight;
+      options.model_fit.cost.edge_weight = o->edge_weight;
+    }
+    options.model_fit.refine = o->refine;
+    options.frame_fit.pedestal = o->pedestal;
+    options.model_fit.pedestal = o->pedestal;
     std::string error;
     if (!options.IsValid(&error)) throw InputError(error);
     checkWritable(o->out);  // before minutes of fitting, not after
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, options.threads);
     fit::FrameStack stack = loadStack(o->stack);
-    fit::FitResult result = fit::fitCapture(stack, options);
+    fit::FitResult result = fit::fitFlare(stack, options);
     result.model.save(o->out);
     if (!o->report.empty()) fit::writeFitReport(o->report, result, stack);
     logInfo(result.summary.BriefReport());
     logInfo("Model written to " + o->out);
+  });
+}
+
+void registerSweep(CLI::App& app) {
+  struct Options {
+    StackArgs stack;
+    std::string out;
+    int threads = 2;
+  };
+  auto o = std::make_shared<Options>();
+  auto* cmd = app.add_subcommand(
+      "sweep", "Draw a capture's sweep image: the horizon rows of all frames over the angle, with the "
+               "ghosts' border traces and ids the fit finds in it");
+  cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder (manifest.json), or EXR files / folders")
+      ->required();
+  cmd->add_option("--out", o->out, "PNG to write")->required();
+  cmd->add_option("--threads", o->threads, "Threads (default 2)");
+  addStackOptions(cmd, o->stack);
+  cmd->callback([o] {
+    if (fs::path(o->out).extension() != ".png") throw InputError(o->out, "--out writes a PNG: name it *.png");
+    checkWritable(o->out);
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::max(1, o->threads));
+    const fit::FrameStack stack = loadStack(o->stack);
+    const fit::FlareFitterOptions options;
+    const fit::Horizon horizon = fit::measureHorizon(stack, options.horizon);
+    const fit::SweepImage sweep = fit::buildSweep(stack, horizon, options.sweep);
+    const std::vector<fit::BorderTrace> traces = fit::findTraces(sweep, options.sweep);
+    fit::CandidateSummary found;
+    const auto candidates = fit::findGhostCandidates(stack, sweep, traces, options.candidates, &found);
+    writeImage8(o->out, fit::sweepPicture(sweep, traces, candidates));
+    logInfo(std::to_string(traces.size()) + " border traces, " + std::to_string(candidates.size()) +
+            " ghosts (" + std::to_string(found.pairs) + " from two borders, " + std::to_string(found.single) +
+            " from one); written to " + o->out);
   });
 }
 
@@ -317,6 +320,7 @@ void registerBenchFit(CLI::App& app) {
 void registerFitCommands(CLI::App& app) {
   registerBenchFit(app);
   registerFit(app);
+  registerSweep(app);
   registerFitEval(app);
   registerFitCeiling(app);
 }

@@ -248,6 +248,7 @@ const FrameData& chooseLevel(const FramePyramid& pyramid,
                              std::span<const model::GhostParameters> seeds,
                              const CostOptions& options) {
   const cv::Rect image_rect(0, 0, pyramid.size().width, pyramid.size().height);
+  if (options.whole_frame) return pyramid.level(levelFor(image_rect.area(), options.max_pixels));
   cv::Rect box;
   for (const auto& g : seeds) box |= model::ghostPixelBounds(g);
   const int m = static_cast<int>(std::ceil(options.region_margin_px));
@@ -276,7 +277,8 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
     box |= model::ghostPixelBounds(g, view_);
   }
   const int m = static_cast<int>(std::ceil(options.region_margin_px / k));
-  region_ = cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & image_rect;
+  region_ = options.whole_frame ? image_rect
+                                : cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) & image_rect;
   const int r = edge.radius();
   grown_ = cv::Rect(region_.x - r, region_.y - r, region_.width + 2 * r, region_.height + 2 * r);
   if (region_.empty()) return;

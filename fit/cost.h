@@ -79,6 +79,8 @@ struct CostOptions {
   // its axis and h as a fraction of the seed's size max(L, R, h) (plus 1 px), and on Cl, Cr in
   // curvature units; 0 = no prior.
   double prior_fraction = 1.0;
+  // The region is the whole frame, whatever the ghosts reach (default false: their reach).
+  bool whole_frame = false;
 
   bool IsValid(std::string* error) const;
 };

@@ -387,7 +387,8 @@ Evaluation evaluateModel(const model::FlareModel& m, const FrameStack& stack,
                          const EvaluationOptions& options) {
   return evaluateGhosts(
       [&](double angle_deg) {
-        return std::optional(FlareAtAngle{m.ghostsAt(angle_deg), m.pedestalAt(angle_deg)});
+        const double field = m.capture.fieldAngle(angle_deg);  // frames are at rig angles
+        return std::optional(FlareAtAngle{m.ghostsAt(field), m.pedestalAt(field)});
       },
       m.channels, stack, options);
 }

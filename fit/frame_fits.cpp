@@ -13,7 +13,7 @@ FrameFits FrameFits::fromResult(const FitResult& result, cv::Size image_size, in
   FrameFits f;
   f.image_size = image_size;
   f.channels = channels;
-  for (const FrameFit& ff : result.frames) {  // in angle order (FitResult), as at() needs them
+  for (const FrameFit& ff : result.frame_fits) {  // in angle order (FitResult), as at() needs them
     FittedFrame frame;
     frame.angle_deg = ff.angle_deg;
     for (size_t k = 0; k < ff.ghosts.size(); ++k) frame.ghosts.push_back({ff.ghost_ids[k], ff.ghosts[k]});

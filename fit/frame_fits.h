@@ -25,7 +25,7 @@
 #include <nlohmann/json_fwd.hpp>
 #include <opencv2/core.hpp>
 
-#include "fit/fit_capture.h"
+#include "fit/flare_fitter.h"
 #include "model/flare_model.h"
 
 namespace flarekit::fit {

@@ -232,12 +232,16 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   // held (an active set) lowered those costs, but over λ × 0.99 / 1 / 1.01 of the 640×427 captures
   // the median PSNR fell (Heliar 26.1 → 24.2 dB, Tessar 23.6 → 22.9 dB). Freed, that veil's fits
   // jumped from frame to frame (15.4, 15.6, 15.8°: centre x 170, 121, 166 px).
-  for (size_t g = 0; g < blocks.size(); ++g)
+  for (size_t g = 0; g < blocks.size(); ++g) {
+    if (!options.held_parameters.empty())
+      problem.SetManifold(pointers[g], new ceres::SubsetManifold(static_cast<int>(blocks[g].size()),
+                                                                 options.held_parameters));
     for (size_t k = 0; k < blocks[g].size(); ++k) {
       problem.SetParameterLowerBound(pointers[g], static_cast<int>(k), bounds[g][k].lower);
       if (bounds[g][k].upper < model::kUnbounded)
         problem.SetParameterUpperBound(pointers[g], static_cast<int>(k), bounds[g][k].upper);
     }
+  }
   ceres::Solver::Options so;
   so.minimizer_type = ceres::TRUST_REGION;
   so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
@@ -320,6 +324,9 @@ GroupFitResult solveWalchGd(GroupCost& cost, std::span<const model::GhostParamet
     // Fixed order, shape before shade: parameter index order is shape (Mx..Cr) then intensity.
     for (size_t g = 0; g < blocks.size(); ++g) {
       for (int k = 0; k < n; ++k) {
+        if (std::find(options.held_parameters.begin(), options.held_parameters.end(), k) !=
+            options.held_parameters.end())
+          continue;
         const model::ParameterBounds& b = bounds[g][k];
         const double h = learning_rate * parameterStep(k, channels, cost.scale());
         const double q = blocks[g][k];

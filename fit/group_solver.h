@@ -64,6 +64,8 @@ struct SolverOptions {
   int gd_patience = 150;
   // Record (time, evaluations, cost) after every iteration (for benchmarks).
   bool record_trace = false;
+  // Indices (ghost_shape.h order) of parameters held at their seeds, e.g. My on the horizon.
+  std::vector<int> held_parameters;
 
   bool IsValid(std::string* error) const;
 };

@@ -21,6 +21,32 @@ using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::Ro
 
 }  // namespace
 
+SquareRootForm squareRootForm(const Eigen::MatrixXd& a, const Eigen::VectorXd& b, double c) {
+  const int n = static_cast<int>(b.size());
+  const Eigen::VectorXd diagonal = a.diagonal();
+  Eigen::VectorXd s(n);
+  for (int i = 0; i < n; ++i) s[i] = diagonal[i] > 0 ? 1 / std::sqrt(diagonal[i]) : 1.0;
+  const Eigen::MatrixXd scaled = s.asDiagonal() * a * s.asDiagonal();
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(scaled);
+  const Eigen::VectorXd d = ldlt.vectorD();
+  const Eigen::VectorXd y = ldlt.matrixL().solve(ldlt.transpositionsP() * s.cwiseProduct(b));
+  SquareRootForm root;
+  Eigen::VectorXd row_scale(n);
+  root.residuals.resize(n);
+  for (int i = 0; i < n; ++i) {
+    const bool seen = d[i] > kMinPivot;
+    row_scale[i] = seen ? std::sqrt(d[i]) : 0.0;
+    root.residuals[i] = seen ? y[i] / row_scale[i] : 0.0;
+  }
+  // P as a matrix, as LDLT::reconstructedMatrix builds it (a product Matrix × Transpositions
+  // applies the swaps in the other order: Pᵀ).
+  const Eigen::MatrixXd p = ldlt.transpositionsP() * Eigen::MatrixXd::Identity(n, n);
+  const Eigen::MatrixXd upper = ldlt.matrixU();
+  root.jacobian = row_scale.asDiagonal() * upper * p * s.cwiseInverse().asDiagonal();
+  root.rest = std::sqrt(std::max(0.0, c - root.residuals.squaredNorm()));
+  return root;
+}
+
 NormalEquations::NormalEquations(const GroupCost& cost)
     : cost_(cost),
       m_(cost.residualsPerSample()),
@@ -115,27 +141,7 @@ void NormalEquations::fill(bool with_jacobians) {
   Eigen::MatrixXd full = a_.selfadjointView<Eigen::Lower>();
   a_.swap(full);
 
-  // The square-root form (see the header).
-  const Eigen::VectorXd diagonal = a_.diagonal();
-  Eigen::VectorXd s(n_total);
-  for (int i = 0; i < n_total; ++i) s[i] = diagonal[i] > 0 ? 1 / std::sqrt(diagonal[i]) : 1.0;
-  const Eigen::MatrixXd scaled = s.asDiagonal() * a_ * s.asDiagonal();
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(scaled);
-  const Eigen::VectorXd d = ldlt.vectorD();
-  const Eigen::VectorXd y = ldlt.matrixL().solve(ldlt.transpositionsP() * s.cwiseProduct(b_));
-  Eigen::VectorXd row_scale(n_total);
-  root_residuals_.resize(n_total);
-  for (int i = 0; i < n_total; ++i) {
-    const bool seen = d[i] > kMinPivot;
-    row_scale[i] = seen ? std::sqrt(d[i]) : 0.0;
-    root_residuals_[i] = seen ? y[i] / row_scale[i] : 0.0;
-  }
-  // P as a matrix, as LDLT::reconstructedMatrix builds it (a product Matrix × Transpositions
-  // applies the swaps in the other order: Pᵀ).
-  const Eigen::MatrixXd p = ldlt.transpositionsP() * Eigen::MatrixXd::Identity(n_total, n_total);
-  const Eigen::MatrixXd upper = ldlt.matrixU();
-  root_jacobian_ = row_scale.asDiagonal() * upper * p * s.cwiseInverse().asDiagonal();
-  root_rest_ = std::sqrt(std::max(0.0, c_ - root_residuals_.squaredNorm()));
+  root_ = squareRootForm(a_, b_, c_);
 }
 
 void NormalEquations::squareRoot(double* residuals, double* const* jacobians) const {
@@ -149,13 +155,13 @@ void NormalEquations::squareRoot(double* residuals, double* const* jacobians) co
     std::fill(residuals + 1, residuals + n_total + 1, 0.0);
     return;
   }
-  std::copy_n(root_residuals_.data(), n_total, residuals);
-  residuals[n_total] = root_rest_;
+  std::copy_n(root_.residuals.data(), n_total, residuals);
+  residuals[n_total] = root_.rest;
   if (jacobians == nullptr) return;
   for (int g = 0; g < ghosts_; ++g) {
     if (jacobians[g] == nullptr) continue;
     Eigen::Map<RowMajor> block(jacobians[g], n_total + 1, n_);
-    block.topRows(n_total) = root_jacobian_.middleCols(g * n_, n_);
+    block.topRows(n_total) = root_.jacobian.middleCols(g * n_, n_);
     block.row(n_total).setZero();
   }
 }

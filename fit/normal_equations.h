@@ -28,6 +28,16 @@
 
 namespace flarekit::fit {
 
+// The square-root form of normal equations (A, b, c) (see above): J̃ (N × N), r̃ (N) and the
+// rest √(c − ‖r̃‖²), so that J̃ᵀJ̃ = A, J̃ᵀr̃ = b and ‖r̃‖² + rest² = c. A must be symmetric
+// positive semi-definite.
+struct SquareRootForm {
+  Eigen::MatrixXd jacobian;
+  Eigen::VectorXd residuals;
+  double rest = 0;
+};
+SquareRootForm squareRootForm(const Eigen::MatrixXd& a, const Eigen::VectorXd& b, double c);
+
 class NormalEquations {
  public:
   // Square tiles of kTilePx level pixels: the ghosts a tile's samples reach, not all of the
@@ -67,9 +77,7 @@ class NormalEquations {
   Eigen::VectorXd b_;
   double c_ = 0;
   bool with_jacobians_ = false;
-  Eigen::MatrixXd root_jacobian_;  // J̃ (N × N)
-  Eigen::VectorXd root_residuals_;  // r̃ (N)
-  double root_rest_ = 0;            // √(c − ‖r̃‖²)
+  SquareRootForm root_;
 };
 
 }  // namespace flarekit::fit

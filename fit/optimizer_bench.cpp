@@ -6,6 +6,9 @@
 #include "common/image.h"
 #include "common/progress.h"
 #include "fit/evaluation.h"
+#include "fit/ghost_candidates.h"
+#include "fit/horizon.h"
+#include "fit/sweep.h"
 
 namespace flarekit::fit {
 
@@ -40,7 +43,14 @@ CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& seed,
 nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw InputError("bench fit: " + error);
-  EdgeFilter edge(options.fit.cost);
+  const CostOptions& cost = options.fit.frame_fit.cost;
+  EdgeFilter edge(cost);
+  // The seeds the fitter starts from: the ghost candidates of stages 2–4 at each frame.
+  const Horizon horizon = measureHorizon(stack, options.fit.horizon);
+  const SweepImage sweep = buildSweep(stack, horizon, options.fit.sweep);
+  const std::vector<BorderTrace> traces = findTraces(sweep, options.fit.sweep);
+  const std::vector<GhostCandidate> candidates =
+      findGhostCandidates(stack, sweep, traces, options.fit.candidates);
   nlohmann::json cases = nlohmann::json::array();
   std::vector<double> speedup_time, speedup_evals;
   const int n = static_cast<int>(stack.frames.size());
@@ -51,29 +61,30 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
     // Sample inside the range (the ends are where ghosts are hardest to see).
     const int index = std::min(n - 1, static_cast<int>((k + 0.5) * n / options.frames));
     const Frame& frame = stack.frames[index];
-    // The data the fitter sees: the frame without the light's own image.
-    const double noise_sigma = estimateNoiseSigma(frame.image, frame.valid);
-    const LightImage light = findLight(luminance(frame.image), frame.valid, noise_sigma, options.fit.detection);
-    FramePyramid pyramid(frameWithoutLight(frame, light, noise_sigma, options.fit.detection), frame.valid,
-                         edge, noise_sigma);
-    auto seeds = detectSeeds(pyramid, light, stack.channels, options.fit);
+    FramePyramid pyramid(frame.image, frame.valid, edge, estimatePixelNoiseSigma(frame.image, frame.valid));
+    // The brightest ghosts present first.
+    std::vector<model::GhostParameters> seeds;
+    for (const auto& c : candidates)
+      if (c.present(index)) seeds.push_back(c.seed(index));
+    auto peak = [](const model::GhostParameters& g) { return std::max(g.border[0], g.inside[0]); };
+    std::stable_sort(seeds.begin(), seeds.end(), [&](const auto& a, const auto& b) { return peak(a) > peak(b); });
     if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
     for (const auto& seed : seeds) {
       std::vector<model::GhostParameters> one = {seed};
-      SolverOptions gd = options.fit.solver;
+      SolverOptions gd = options.fit.frame_fit.solver;
       gd.optimizer = Optimizer::kWalchGd;
       gd.gd_max_iterations = options.gd_iterations;
       gd.gd_patience = options.gd_iterations;
       gd.record_trace = true;
-      GroupCost gd_cost(pyramid, edge, {}, one, options.fit.cost);
+      GroupCost gd_cost(pyramid, edge, {}, one, cost);
       const GroupFitResult g = solveGroup(gd_cost, one, gd);
-      SolverOptions lm = options.fit.solver;
+      SolverOptions lm = options.fit.frame_fit.solver;
       lm.optimizer = Optimizer::kCeres;
       lm.record_trace = true;
       lm.max_iterations = 100;
       lm.function_tolerance = 1e-10;
       lm.parameter_tolerance = 1e-10;
-      GroupCost lm_cost(pyramid, edge, {}, one, options.fit.cost);
+      GroupCost lm_cost(pyramid, edge, {}, one, cost);
       const GroupFitResult c = solveGroup(lm_cost, one, lm);
       // GD's time and evaluations to its own final cost.
       TracePoint gd_reach = g.trace.back();

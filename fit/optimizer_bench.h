@@ -1,7 +1,7 @@
 #pragma once
 // `flarekit bench fit`: Ceres's Levenberg–Marquardt against the paper's gradient descent
-// (Walch et al. 2018 §3.3.2) on the same frames from the same starting points (the seeds
-// detection finds), on the same cost. Per case: the GD's final cost, its time and cost
+// (Walch et al. 2018 §3.3.2) on the same frames from the same starting points (the ghost
+// candidates' seeds, fit/ghost_candidates.h), on the same cost. Per case: the GD's final cost, its time and cost
 // evaluations to reach it, and Ceres's time and evaluations to reach that cost (or its final
 // cost if it never does); why Ceres stopped, and where each optimizer ended (its final
 // parameters), so that a case Ceres does not win can be looked into: describeCeresEnd tells a
@@ -13,16 +13,16 @@
 #include <nlohmann/json.hpp>
 
 #include "fit/cost.h"
-#include "fit/fit_capture.h"
+#include "fit/flare_fitter.h"
 #include "fit/frames.h"
 
 namespace flarekit::fit {
 
 struct OptimizerBenchOptions {
   int frames = 3;            // frames sampled evenly from the stack (≥ 1)
-  int seeds_per_frame = 1;   // brightest detections per frame used as starts (≥ 1)
+  int seeds_per_frame = 1;   // brightest ghost candidates per frame used as starts (≥ 1)
   int gd_iterations = 200;   // GD iterations per case (≥ 1)
-  FitOptions fit;            // cost, detection, threads
+  FlareFitterOptions fit;    // the stages that find the seeds, the cost, threads
 
   bool IsValid(std::string* error) const;
 };

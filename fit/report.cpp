@@ -8,6 +8,7 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
 
 #include "common/atomic_file.h"
 #include "common/config.h"
@@ -248,69 +249,119 @@ void writeCeilingSheets(const fs::path& dir, const ModelCeiling& ceiling) {
   }
 }
 
+cv::Mat sweepRows(const model::FlareModel& m, const SweepImage& sweep, cv::Size size, int channels) {
+  cv::Mat rows = cv::Mat::zeros(sweep.rows(), sweep.width(), CV_32F);
+  const int band = 3;
+  tbb::parallel_for(0, sweep.rows(), [&](int i) {
+    const cv::Mat lum = luminance(m.render(m.capture.fieldAngle(sweep.angles_deg[i]), 0, size));
+    (void)channels;
+    const int centre = static_cast<int>(std::floor(sweep.horizon_y_px));
+    for (int x = 0; x < sweep.width(); ++x) {
+      double sum = 0;
+      int n = 0;
+      for (int d = -band; d <= band; ++d)
+        if (const int y = centre + d; y >= 0 && y < lum.rows) {
+          sum += lum.at<float>(y, x);
+          ++n;
+        }
+      rows.at<float>(i, x) = static_cast<float>(n ? sum / n : 0);
+    }
+  });
+  return rows;
+}
+
+cv::Mat sweepPicture(const SweepImage& sweep, const std::vector<BorderTrace>& traces,
+                     const std::vector<GhostCandidate>& candidates, const cv::Mat& model_rows) {
+  constexpr int kRowPx = 3;  // picture rows per frame
+  // One log scale for both panels: from the noise to the brightest ghost (the light clips).
+  std::vector<float> values;
+  for (int i = 0; i < sweep.rows(); ++i)
+    for (int x = 0; x < sweep.width(); x += 2) values.push_back(sweep.radiance.at<float>(i, x));
+  std::sort(values.begin(), values.end());
+  cv::Scalar noise = cv::mean(sweep.noise);
+  const double lo = std::max(0.5 * noise[0], 1e-12);
+  const double hi = std::max(values[std::min(values.size() - 1, values.size() * 995 / 1000)] * 2.0, lo * 100);
+  auto panel = [&](const cv::Mat& rows) {
+    cv::Mat tall;
+    cv::resize(rows, tall, cv::Size(rows.cols, rows.rows * kRowPx), 0, 0, cv::INTER_NEAREST);
+    return logView(tall, lo, hi);
+  };
+  cv::Mat left = panel(sweep.radiance);
+  const cv::Scalar rising(0, 165, 255), falling(255, 200, 0), light(0, 255, 255);
+  for (const auto& t : traces) {
+    const cv::Scalar colour = t.side == BorderSide::kLeft ? rising : falling;
+    for (size_t k = 1; k < t.points.size(); ++k)
+      cv::line(left, {int(t.points[k - 1].x_px), t.points[k - 1].row * kRowPx + 1},
+               {int(t.points[k].x_px), t.points[k].row * kRowPx + 1}, colour, 1, cv::LINE_AA);
+  }
+  for (int i = 0; i < sweep.rows(); ++i)
+    if (std::isfinite(sweep.light_x_px[i]))
+      cv::circle(left, {int(sweep.light_x_px[i]), i * kRowPx + 1}, 1, light, cv::FILLED);
+  for (const auto& c : candidates) {
+    const int id = c.left_trace >= 0 ? c.left_trace : c.right_trace;
+    const BorderTrace& t = traces[id];
+    const BorderPoint& p = t.points[t.points.size() / 2];
+    cv::putText(left, std::to_string(c.id), {int(p.x_px) + 3, p.row * kRowPx + 4}, cv::FONT_HERSHEY_SIMPLEX,
+                0.4, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  }
+  cv::putText(left, "capture, traces and ghost ids", {6, 14}, cv::FONT_HERSHEY_SIMPLEX, 0.45, light, 1);
+  if (model_rows.empty()) return left;
+  cv::Mat right = panel(model_rows);
+  cv::putText(right, "model", {6, 14}, cv::FONT_HERSHEY_SIMPLEX, 0.45, light, 1);
+  cv::Mat both;
+  cv::hconcat(std::vector<cv::Mat>{left, cv::Mat(left.rows, 4, CV_8UC3, cv::Scalar(0, 0, 255)), right}, both);
+  return both;
+}
+
 void writeFitReport(const fs::path& dir, const FitResult& result, const FrameStack& stack,
                     const ReportOptions& options) {
   fs::create_directories(dir);
   const auto names = model::parameterNames(stack.channels);
-  nlohmann::json summary;
-  const FitSummary& s = result.summary;
-  summary["brief"] = s.BriefReport();
-  summary["optimizer"] = s.optimizer;
-  summary["frames_total"] = s.frames_total;
-  summary["frames_fitted"] = s.frames_fitted;
-  summary["ghosts"] = s.ghosts;
-  summary["detections"] = s.detections;
-  summary["detections_rejected"] = s.detections_rejected;
-  summary["ghosts_dropped_short"] = s.ghosts_dropped_short;
-  summary["seconds_total"] = s.seconds_total;
-  summary["seconds_fitting"] = s.seconds_fitting;
-  summary["seconds_detecting"] = s.seconds_detecting;
-  summary["seconds_modelling"] = s.seconds_modelling;
-  summary["evaluations"] = s.evaluations;
-  summary["warnings"] = s.warnings;
+  nlohmann::json summary = result.summary.toJson();
+  summary["brief"] = result.summary.BriefReport();
+  // Each ghost: its borders and range, and its fit in every frame (ghost_<id>.csv).
   nlohmann::json ghosts = nlohmann::json::array();
-  for (const auto& t : result.tracks) {
-    int flagged = 0, carried = 0;
-    for (bool b : t.unexplained) flagged += b;
-    for (bool b : t.carried) carried += b;
-    ghosts.push_back({{"id", t.id},
-                      {"angle_min_deg", t.angles_deg.front()},
-                      {"angle_max_deg", t.angles_deg.back()},
-                      {"frames", t.angles_deg.size()},
-                      {"key_frame_angle_deg", result.frames.empty() ? 0.0 : t.angles_deg.front()},
-                      {"ends_low", t.end_low},
-                      {"ends_high", t.end_high},
-                      {"frames_not_described", flagged},
-                      {"frames_carried_through_the_light", carried},
-                      {"fraction_not_described", double(flagged) / t.angles_deg.size()}});
+  for (const auto& c : result.candidates) {
     std::ostringstream csv;
     csv << std::setprecision(9) << "angle_deg";
     for (const auto& n : names) csv << "," << n;
-    csv << ",residual_rms,peak,not_described,carried\n";
-    for (size_t i = 0; i < t.angles_deg.size(); ++i) {
-      csv << t.angles_deg[i];
-      for (double v : model::toParameterVector(t.fits[i])) csv << "," << v;
-      csv << "," << t.residual_rms[i] << "," << t.peak[i] << "," << (t.unexplained[i] ? 1 : 0) << ","
-          << (i < t.carried.size() && t.carried[i] ? 1 : 0) << "\n";
-    }
-    writeTextFileAtomically(dir / ("ghost_" + std::to_string(t.id) + ".csv"), csv.str());
+    csv << "\n";
+    int frames = 0;
+    for (const auto& f : result.frame_fits)
+      for (size_t k = 0; k < f.ghost_ids.size(); ++k)
+        if (f.ghost_ids[k] == c.id) {
+          csv << f.angle_deg;
+          for (double v : model::toParameterVector(f.ghosts[k])) csv << "," << v;
+          csv << "\n";
+          ++frames;
+        }
+    ghosts.push_back({{"id", c.id},
+                      {"left_trace", c.left_trace},
+                      {"right_trace", c.right_trace},
+                      {"angle_min_deg", stack.frames[result.frames_used[c.first_row]].angle_deg},
+                      {"angle_max_deg", stack.frames[result.frames_used[c.last_row]].angle_deg},
+                      {"frames_fitted", frames}});
+    writeTextFileAtomically(dir / ("ghost_" + std::to_string(c.id) + ".csv"), csv.str());
   }
-  summary["ghost_tracks"] = ghosts;
+  summary["ghosts_found"] = ghosts;
   writeJsonFile(dir / "summary.json", summary);
   FrameFits::fromResult(result, stack.size, stack.channels).save(dir / "frame_fits.json");
+  writeImage8(dir / "sweep.png",
+              sweepPicture(result.sweep, result.traces, result.candidates,
+                           sweepRows(result.model, result.sweep, stack.size, stack.channels)));
 
-  if (options.contact_sheets > 0 && !result.frames.empty()) {
-    const int n = static_cast<int>(result.frames.size());
+  if (options.contact_sheets > 0 && !result.frame_fits.empty()) {
+    const int n = static_cast<int>(result.frame_fits.size());
     const int count = std::min(options.contact_sheets, n);
     for (int k = 0; k < count; ++k) {
       const int i = count == 1 ? 0 : k * (n - 1) / (count - 1);
-      const FrameFit& ff = result.frames[i];
+      const FrameFit& ff = result.frame_fits[i];
       const Frame& f = stack.frames[ff.frame];
       // The flare as this frame's fits drew it, and as the model file has it (polynomials): what
       // users get, and what of it the polynomials lost.
       cv::Mat fits_image = model::renderGhosts(ff.ghosts, stack.size, stack.channels);
       ff.pedestal.addTo(fits_image, stack.size);
-      const cv::Mat model_image = result.model.render(f.angle_deg, 0, stack.size);
+      const cv::Mat model_image = result.model.render(result.model.capture.fieldAngle(f.angle_deg), 0, stack.size);
       cv::Mat sheet = contactSheet(f.image, fits_image, model_image, ff.noise_sigma);
       std::ostringstream name;
       name << "contact_" << std::fixed << std::setprecision(2) << f.angle_deg << ".png";

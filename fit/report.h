@@ -1,11 +1,11 @@
 #pragma once
 // `flarekit fit --report DIR`: what a person checks after a fit.
-//   DIR/summary.json            the FitSummary, every ghost's range, key frame, end reasons, and
-//                               how often the model could not describe it (caustics, folds)
-//   DIR/ghost_<id>.csv          the ghost's track: angle, every parameter, residual RMS, peak,
-//                               unexplained flag, per fitted frame
+//   DIR/summary.json            the FitSummary (every stage's figures and times), and every
+//                               ghost's borders, angle range and frames fitted
+//   DIR/ghost_<id>.csv          the ghost's fit in every frame: angle, every parameter
 //   DIR/frame_fits.json         every frame's fits (fit/frame_fits.h), which fit-eval measures
 //                               like a model
+//   DIR/sweep.png               the sweep image with the traces and ghost ids, beside the model's
 //   DIR/contact_<angle>.png     for sampled frames: capture | the frame's fits | model |
 //                               |capture − model|, on one shared logarithmic scale (decades from
 //                               the noise floor to the peak)
@@ -14,7 +14,7 @@
 #include <filesystem>
 
 #include "fit/evaluation.h"
-#include "fit/fit_capture.h"
+#include "fit/flare_fitter.h"
 #include "fit/frames.h"
 
 namespace flarekit::fit {
@@ -26,6 +26,15 @@ struct ReportOptions {
 
 void writeFitReport(const std::filesystem::path& dir, const FitResult& result,
                     const FrameStack& stack, const ReportOptions& options = {});
+
+// The sweep picture (8-bit BGR; `flarekit sweep`, the report's sweep.png): S(θ, x) in log scale,
+// θ down (three picture rows a frame), with the border traces (orange: left borders, rising; blue:
+// right borders, falling), the light's centre (yellow) and each ghost's id; beside it, when
+// `model_rows` is not empty, the model's own S on the same scale (sweepRows).
+cv::Mat sweepPicture(const SweepImage& sweep, const std::vector<BorderTrace>& traces,
+                     const std::vector<GhostCandidate>& candidates, const cv::Mat& model_rows = {});
+// The model's S: the same band about the horizon of the model rendered at every row's angle.
+cv::Mat sweepRows(const model::FlareModel& model, const SweepImage& sweep, cv::Size size, int channels);
 
 // The contact-sheet image (8-bit BGR) of one frame: capture | fits | model | |capture − model|.
 cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv::Mat& model_image,

@@ -38,7 +38,7 @@ CaptureInfo parseCapture(const ConfigNode& c) {
   if (!c.isObject()) c.fail("must be a table");
   c.checkKnownKeys({"camera", "lens", "f_number", "iso", "exposure_s", "light", "image_width",
                     "image_height", "pixel_pitch_um", "angle_step_deg", "light_illuminance_lux",
-                    "clip_level", "focal_length_mm"});
+                    "clip_level", "focal_length_mm", "angle_zero_deg", "optical_axis_px"});
   CaptureInfo info;
   info.camera = text(c["camera"]);
   info.lens = text(c["lens"]);
@@ -58,6 +58,17 @@ CaptureInfo parseCapture(const ConfigNode& c) {
   if (c.has("light_illuminance_lux")) info.light_illuminance_lux = positiveNumber(c["light_illuminance_lux"]);
   if (c.has("clip_level")) info.clip_level = positiveNumber(c["clip_level"]);
   if (c.has("focal_length_mm")) info.focal_length_mm = positiveNumber(c["focal_length_mm"]);
+  if (c.has("angle_zero_deg")) {
+    info.angle_zero_deg = c["angle_zero_deg"].number();
+    if (!(std::abs(info.angle_zero_deg) <= 90)) c["angle_zero_deg"].fail("must be within ±90°");
+  }
+  if (c.has("optical_axis_px")) {
+    const ConfigNode axis = c["optical_axis_px"];
+    const std::vector<double> v = axis.numbers();
+    if (v.size() != 2 || !std::isfinite(v[0]) || !std::isfinite(v[1]))
+      axis.fail("must be [x, y], two finite numbers of pixels");
+    info.optical_axis_px = cv::Point2d(v[0], v[1]);
+  }
   return info;
 }
 
@@ -228,6 +239,9 @@ bool FlareModel::IsValid(std::string* error) const {
       !std::isfinite(c.exposure_s) || !std::isfinite(c.pixel_pitch_um) || !std::isfinite(c.angle_step_deg))
     return fail("capture: f_number, iso, exposure_s, pixel_pitch_um and angle_step_deg must be positive");
   if (c.image_size.width <= 0 || c.image_size.height <= 0) return fail("capture: image size must be positive");
+  if (!(std::abs(c.angle_zero_deg) <= 90)) return fail("capture: angle_zero_deg must be within ±90°");
+  if (c.optical_axis_px && (!std::isfinite(c.optical_axis_px->x) || !std::isfinite(c.optical_axis_px->y)))
+    return fail("capture: optical_axis_px must be finite");
   if (!(c.light_illuminance_lux >= 0) || !std::isfinite(c.light_illuminance_lux) || !(c.clip_level >= 0) ||
       !std::isfinite(c.clip_level) || !(c.focal_length_mm >= 0) || !std::isfinite(c.focal_length_mm))
     return fail("capture: light_illuminance_lux, clip_level and focal_length_mm must be positive (or 0 = "
@@ -267,6 +281,9 @@ nlohmann::json FlareModel::toJson() const {
   if (capture.light_illuminance_lux > 0) j["capture"]["light_illuminance_lux"] = capture.light_illuminance_lux;
   if (capture.clip_level > 0) j["capture"]["clip_level"] = capture.clip_level;
   if (capture.focal_length_mm > 0) j["capture"]["focal_length_mm"] = capture.focal_length_mm;
+  if (capture.angle_zero_deg != 0) j["capture"]["angle_zero_deg"] = capture.angle_zero_deg;
+  if (capture.optical_axis_px)
+    j["capture"]["optical_axis_px"] = {capture.optical_axis_px->x, capture.optical_axis_px->y};
   j["channels"] = channels;
   nlohmann::json list = nlohmann::json::array();
   for (const GhostTrack& g : ghosts) {
@@ -326,8 +343,10 @@ ViewTransform FlareModel::viewAt(double roll_deg, std::optional<cv::Size> size) 
   ViewTransform v;
   v.roll_rad = roll_deg * std::numbers::pi / 180.0;
   v.scale = static_cast<double>(s.width) / capture.image_size.width;
-  v.image_center = cv::Point2d(0.5 * s.width, 0.5 * s.height);
-  v.model_center = cv::Point2d(0.5 * capture.image_size.width, 0.5 * capture.image_size.height);
+  // The image's middle shows the capture's middle; the roll turns about the optical axis.
+  const cv::Point2d capture_middle(0.5 * capture.image_size.width, 0.5 * capture.image_size.height);
+  v.model_center = capture.opticalAxis();
+  v.image_center = cv::Point2d(0.5 * s.width, 0.5 * s.height) + (v.model_center - capture_middle) * v.scale;
   return v;
 }
 

@@ -1,14 +1,15 @@
 #pragma once
 // The flare model of a lens (Walch et al. 2018 §3.3.2, §3.4): per ghost, every parameter of
 // ghost_shape.h as a polynomial in the rig angle θ, valid over the ghost's angle range; stored as
-// `model.json` (format "flarekit.flare-model", version 1):
+// `model.json` (format "flarekit.flare-model", version 2):
 //
 //   {
-//     "format": "flarekit.flare-model", "version": 1,
+//     "format": "flarekit.flare-model", "version": 2,
 //     "capture": {
 //       "camera": "Canon EOS 5D Mark II", "lens": "EF 24mm f/1.4L", "f_number": 1.4,
 //       "iso": 100, "exposure_s": 1.0, "light": "Olympus CLV-S",
-//       "image_width": 1280, "image_height": 720, "pixel_pitch_um": 6.4, "angle_step_deg": 0.2
+//       "image_width": 1280, "image_height": 720, "pixel_pitch_um": 6.4, "angle_step_deg": 0.2,
+//       "angle_zero_deg": 0.12, "optical_axis_px": [641.3, 359.8]          // optional
 //     },
 //     "channels": 1,                       // 1 (grey) or 3 (R, G, B)
 //     "ghosts": [
@@ -25,8 +26,11 @@
 // smooth glow under the ghosts, model/pedestal.h) is a polynomial in θ per term likewise; a file
 // without one has none.
 //
-// Angles: θ is the rig angle (shared/DESIGN.md; positive moves the light image to −x) and φ the
-// roll about the image centre, both in degrees at this API, as in files and on the command line.
+// Angles: θ is the field angle of the light (positive moves the light image to −x): the rig
+// angle less the capture's optical zero, angle_zero_deg (the rig angle at which the light lay on
+// the optical axis, measured by the fit; 0 when not recorded). φ is the roll about the optical
+// axis (optical_axis_px; the image centre when not recorded). Both in degrees at this API, as in
+// files and on the command line. Version 1 files have neither key and load as before.
 
 #include <filesystem>
 #include <optional>
@@ -43,7 +47,7 @@
 namespace flarekit::model {
 
 inline constexpr char kFlareModelFormat[] = "flarekit.flare-model";
-inline constexpr int kFlareModelVersion = 1;
+inline constexpr int kFlareModelVersion = 2;
 inline constexpr int kMaxPolynomialDegree = 10;
 
 // How the captures the model was fitted to were taken (what prediction scales brightness by).
@@ -67,6 +71,18 @@ struct CaptureInfo {
   // the lens's focal length, mm: with the pixel pitch it fixes where a light at θ images (f·tan θ)
   // and how large the ghosts are, so a prediction can tell a scene camera that differs.
   double focal_length_mm = 0;
+  // The optical zero (fit/horizon.h): the rig angle with the light on the optical axis, degrees
+  // (the model's angles are rig angles less this), and where the optical axis meets the image,
+  // capture pixels (nullopt: the image centre).
+  double angle_zero_deg = 0;
+  std::optional<cv::Point2d> optical_axis_px;
+
+  // The optical axis in capture pixels.
+  cv::Point2d opticalAxis() const {
+    return optical_axis_px.value_or(cv::Point2d(0.5 * image_size.width, 0.5 * image_size.height));
+  }
+  // The field angle θ of a frame taken at rig angle `rig_angle_deg`.
+  double fieldAngle(double rig_angle_deg) const { return rig_angle_deg - angle_zero_deg; }
 };
 
 // p(θ) = Σ coefficients[k]·θ^k.
@@ -142,8 +158,8 @@ class FlareModel {
   Pedestal pedestalAt(double angle_deg) const;
 
   // The ghosts at θ as rendered into an image of `size` (default: the capture size) at roll φ
-  // about the image centre: the view maps the image centre (W/2, H/2) to the capture centre and
-  // scales by W / capture width (the flare keeps its size relative to the image width).
+  // about the optical axis: the view maps the optical axis, scaled by W / capture width, to the
+  // capture's optical axis (the flare keeps its size relative to the image width).
   ViewTransform viewAt(double roll_deg, std::optional<cv::Size> size = std::nullopt) const;
 
   // Renders all ghosts and the pedestal at θ and roll φ (degrees) into an image of `size`

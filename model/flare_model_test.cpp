@@ -192,7 +192,7 @@ TEST(FlareModel, BadFilesAreRejectedWithTheFileAndKey) {
   };
   const std::vector<Case> cases = {
       {"wrong_format", [](auto& j) { j["format"] = "flarekit.lens"; }, "format"},
-      {"wrong_version", [](auto& j) { j["version"] = 2; }, "version"},
+      {"wrong_version", [](auto& j) { j["version"] = 3; }, "version"},
       {"missing_capture", [](auto& j) { j.erase("capture"); }, "capture"},
       {"missing_lens", [](auto& j) { j["capture"].erase("lens"); }, "lens"},
       {"missing_parameter", [](auto& j) { j["ghosts"][1]["parameters"].erase("Cl"); },

@@ -1,0 +1,338 @@
+#include "fit/ghost_candidates.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
+
+#include "common/image.h"
+#include "fit/polynomial.h"
+
+namespace flarekit::fit {
+
+namespace {
+
+double median(std::vector<double> v) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+double cleanAt(const SweepImage& s, int row, int x) {
+  x = std::clamp(x, 0, s.width() - 1);
+  return s.radiance.at<float>(row, x) - s.light.at<float>(row, x);
+}
+
+// The mean of S − light over [x0, x1] of a row (clipped to the frame), NaN when empty.
+double meanOver(const SweepImage& s, int row, double x0, double x1) {
+  const int a = std::max(0, static_cast<int>(std::floor(x0)));
+  const int b = std::min(s.width() - 1, static_cast<int>(std::floor(x1)));
+  double sum = 0;
+  int n = 0;
+  for (int x = a; x <= b; ++x)
+    if (s.valid.at<uchar>(row, x) || s.radiance.at<float>(row, x) > 0) {
+      sum += cleanAt(s, row, x);
+      ++n;
+    }
+  return n ? sum / n : std::numeric_limits<double>::quiet_NaN();
+}
+
+// Whether S stays raised by `fraction` of the trace's step from the trace to the frame's edge on
+// the ghost's side, in most of the trace's frames: the ghost's other border lies beyond that edge.
+bool raisedToEdge(const SweepImage& s, const BorderTrace& t, double fraction) {
+  int raised = 0, tested = 0;
+  for (const auto& p : t.points) {
+    if (!(p.jump > 0)) continue;
+    const bool left = t.side == BorderSide::kLeft;
+    const double outside = left ? meanOver(s, p.row, p.x_px - 5, p.x_px - 2)
+                                : meanOver(s, p.row, p.x_px + 2, p.x_px + 5);
+    std::vector<double> inside;
+    const int a = left ? static_cast<int>(p.x_px) + 3 : 0;
+    const int b = left ? s.width() - 1 : static_cast<int>(p.x_px) - 3;
+    for (int x = a; x <= b; ++x)
+      if (s.valid.at<uchar>(p.row, x)) inside.push_back(cleanAt(s, p.row, x) - outside);
+    if (inside.size() < 4 || !std::isfinite(outside)) continue;
+    ++tested;
+    // A low quantile: the whole stretch, not a part of it, must be raised.
+    std::nth_element(inside.begin(), inside.begin() + inside.size() / 5, inside.end());
+    if (inside[inside.size() / 5] >= fraction * p.jump) ++raised;
+  }
+  return tested > 0 && 2 * raised > tested;
+}
+
+// The vertical profile of frame `f` through column x (± half columns), the rows mirrored about
+// the horizon averaged: profile[k] at distance k + ½ below... above the horizon's row, k ≥ 0.
+std::vector<double> verticalProfile(const cv::Mat& lum, const cv::Mat& valid, double x,
+                                    double horizon_y, int half) {
+  const int c0 = std::max(0, static_cast<int>(std::floor(x)) - half);
+  const int c1 = std::min(lum.cols - 1, static_cast<int>(std::floor(x)) + half);
+  const int centre = static_cast<int>(std::floor(horizon_y));
+  std::vector<double> profile;
+  if (c0 > c1) return profile;
+  for (int k = 0;; ++k) {
+    const int down = centre + k, up = centre - 1 - k;
+    if (down >= lum.rows && up < 0) break;
+    double sum = 0;
+    int n = 0;
+    for (int row : {down, up}) {
+      if (row < 0 || row >= lum.rows) continue;
+      for (int c = c0; c <= c1; ++c)
+        if (valid.at<uchar>(row, c)) {
+          sum += lum.at<float>(row, c);
+          ++n;
+        }
+    }
+    profile.push_back(n ? sum / n : std::numeric_limits<double>::quiet_NaN());
+  }
+  return profile;
+}
+
+// The distance from the horizon at which the profile falls most steeply (in log), within
+// [lo, hi], or NaN when it does not fall there.
+double fallingEdge(const std::vector<double>& profile, double lo, double hi) {
+  const int n = static_cast<int>(profile.size());
+  std::vector<double> l(n);
+  double floor = std::numeric_limits<double>::infinity();
+  for (double v : profile)
+    if (std::isfinite(v) && v > 0) floor = std::min(floor, v);
+  if (!std::isfinite(floor)) return std::numeric_limits<double>::quiet_NaN();
+  for (int k = 0; k < n; ++k) l[k] = std::log(std::max(std::isfinite(profile[k]) ? profile[k] : floor, floor));
+  double best = 0, at = std::numeric_limits<double>::quiet_NaN();
+  for (int k = std::max(1, static_cast<int>(lo)); k + 2 < n && k <= hi; ++k) {
+    // The step across k (three rows on each side), falling outwards.
+    const double inner = (l[k - 1] + l[std::max(0, k - 2)]) / 2;
+    const double outer = (l[k + 1] + l[k + 2]) / 2;
+    if (inner - outer > best) {
+      best = inner - outer;
+      at = k + 0.5;
+    }
+  }
+  return at;
+}
+
+// Robust polynomial values of `v` over the rows (degree by length).
+std::vector<double> smoothed(const std::vector<double>& angles, const std::vector<double>& v) {
+  std::vector<double> a, y;
+  for (size_t i = 0; i < v.size(); ++i)
+    if (std::isfinite(v[i])) {
+      a.push_back(angles[i]);
+      y.push_back(v[i]);
+    }
+  std::vector<double> out(v.size(), std::numeric_limits<double>::quiet_NaN());
+  if (a.empty()) return out;
+  const int degree = std::clamp(static_cast<int>(a.size()) / 10, 0, 3);
+  const model::Polynomial p = robustPolynomial(a, y, degree);
+  for (size_t i = 0; i < v.size(); ++i) out[i] = p.evaluate(angles[i]);
+  return out;
+}
+
+// A border's position at every row of [first, last]: its trace's polynomial, of degree 2 at most
+// beyond the trace's own frames (it is extrapolated there).
+std::vector<double> borderAt(const BorderTrace& t, const SweepImage& s, int first, int last) {
+  std::vector<double> angles, xs;
+  for (const auto& p : t.points) {
+    angles.push_back(s.angles_deg[p.row]);
+    xs.push_back(p.x_px);
+  }
+  const model::Polynomial outside = robustPolynomial(angles, xs, std::min<int>(2, angles.size() / 8));
+  std::vector<double> out;
+  for (int r = first; r <= last; ++r) {
+    const bool within = r >= t.firstRow() && r <= t.lastRow();
+    out.push_back((within ? t.x_of_angle : outside).evaluate(s.angles_deg[r]));
+  }
+  return out;
+}
+
+}  // namespace
+
+bool CandidateOptions::IsValid(std::string* error) const {
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (min_shared_rows < 1) return fail("candidates: min_shared_rows must be ≥ 1");
+  if (!(max_step_ratio > 1)) return fail("candidates: max_step_ratio must be > 1");
+  if (!(max_width_change_per_deg > 0)) return fail("candidates: max_width_change_per_deg must be > 0");
+  if (!(single_significance > 0)) return fail("candidates: single_significance must be > 0");
+  if (!(single_raised_fraction > 0 && single_raised_fraction <= 1))
+    return fail("candidates: single_raised_fraction must be in (0, 1]");
+  if (profile_half_columns < 0) return fail("candidates: profile_half_columns must be ≥ 0");
+  if (!(min_height_fraction > 0 && min_height_fraction < 1))
+    return fail("candidates: min_height_fraction must be in (0, 1)");
+  if (!(seed_outside_falloff_px > 0)) return fail("candidates: seed_outside_falloff_px must be > 0");
+  return true;
+}
+
+std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const SweepImage& s,
+                                                const std::vector<BorderTrace>& traces,
+                                                const CandidateOptions& o,
+                                                CandidateSummary* summary) {
+  std::string error;
+  if (!o.IsValid(&error)) throw std::invalid_argument(error);
+  // Pairs by the agreement of their steps.
+  struct Pair {
+    double score;
+    int left, right;
+  };
+  std::vector<Pair> pairs;
+  for (const auto& l : traces) {
+    if (l.side != BorderSide::kLeft) continue;
+    for (const auto& r : traces) {
+      if (r.side != BorderSide::kRight) continue;
+      if (r.lastRow() < l.firstRow() || l.lastRow() < r.firstRow()) continue;
+      std::vector<double> ratios, angles, widths;
+      bool crossed = false;
+      for (const auto& p : l.points) {
+        const BorderPoint* q = r.at(p.row);
+        if (!q) continue;
+        if (q->x_px <= p.x_px + 1) crossed = true;
+        else if (p.jump > 0 && q->jump > 0) {
+          ratios.push_back(std::abs(std::log(p.jump / q->jump)));
+          angles.push_back(s.angles_deg[p.row]);
+          widths.push_back(0.5 * (q->x_px - p.x_px));
+        }
+      }
+      if (crossed || static_cast<int>(ratios.size()) < o.min_shared_rows) continue;
+      const double steps = median(ratios);
+      if (steps > std::log(o.max_step_ratio)) continue;
+      // A ghost keeps its size as it moves (its two borders move alike; paraxially exactly): the
+      // relative change of the half-width per degree counts against a pair.
+      const model::Polynomial w = leastSquaresPolynomial(angles, widths, 1);
+      const double mean_width = std::accumulate(widths.begin(), widths.end(), 0.0) / widths.size();
+      const double growth = w.coefficients.size() > 1 ? std::abs(w.coefficients[1]) / mean_width : 0.0;
+      if (growth > o.max_width_change_per_deg) continue;
+      pairs.push_back({steps + growth, l.id, r.id});
+    }
+  }
+  std::sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return a.score < b.score; });
+  std::vector<bool> used(traces.size(), false);
+  struct Borders {
+    int left = -1, right = -1;
+  };
+  std::vector<Borders> ghosts;
+  for (const auto& p : pairs) {
+    if (used[p.left] || used[p.right]) continue;
+    used[p.left] = used[p.right] = true;
+    ghosts.push_back({p.left, p.right});
+  }
+  CandidateSummary sum;
+  sum.pairs = static_cast<int>(ghosts.size());
+  for (const auto& t : traces) {
+    if (used[t.id]) continue;
+    if (t.significance >= o.single_significance && raisedToEdge(s, t, o.single_raised_fraction)) {
+      ghosts.push_back(t.side == BorderSide::kLeft ? Borders{t.id, -1} : Borders{-1, t.id});
+      ++sum.single;
+    } else {
+      ++sum.traces_unused;
+    }
+  }
+  if (summary) *summary = sum;
+
+  // Seeds at every frame of each ghost's range.
+  std::vector<cv::Mat> lums(stack.frames.size());
+  tbb::parallel_for(size_t{0}, stack.frames.size(), [&](size_t i) { lums[i] = luminance(stack.frames[i].image); });
+  std::vector<GhostCandidate> out(ghosts.size());
+  tbb::parallel_for(size_t{0}, ghosts.size(), [&](size_t g) {
+    const BorderTrace* l = ghosts[g].left >= 0 ? &traces[ghosts[g].left] : nullptr;
+    const BorderTrace* r = ghosts[g].right >= 0 ? &traces[ghosts[g].right] : nullptr;
+    GhostCandidate& c = out[g];
+    c.id = static_cast<int>(g);
+    c.left_trace = l ? l->id : -1;
+    c.right_trace = r ? r->id : -1;
+    c.first_row = std::min(l ? l->firstRow() : s.rows(), r ? r->firstRow() : s.rows());
+    c.last_row = std::max(l ? l->lastRow() : -1, r ? r->lastRow() : -1);
+    const int n = c.last_row - c.first_row + 1;
+    std::vector<double> angles(s.angles_deg.begin() + c.first_row, s.angles_deg.begin() + c.last_row + 1);
+    std::vector<double> xl = l ? borderAt(*l, s, c.first_row, c.last_row) : std::vector<double>();
+    std::vector<double> xr = r ? borderAt(*r, s, c.first_row, c.last_row) : std::vector<double>();
+    std::vector<double> steps;
+    for (const BorderTrace* t : {l, r})
+      if (t)
+        for (const auto& p : t->points)
+          if (p.jump > 0) steps.push_back(p.jump);
+    c.step = median(steps);
+    // Half-heights from the vertical profiles, and a one-border ghost's unseen half from the
+    // curvature of its outline near the seen border (a circle through the chord there).
+    std::vector<double> height(n), middle(n), half(n), inside(n);
+    for (int i = 0; i < n; ++i) {
+      const int row = c.first_row + i;
+      const cv::Mat& lum = lums[row];
+      const cv::Mat& valid = stack.frames[row].valid;
+      double a0, mx;
+      if (l && r) {
+        a0 = 0.5 * (xr[i] - xl[i]);
+        mx = 0.5 * (xr[i] + xl[i]);
+      } else {
+        const double border = l ? xl[i] : xr[i];
+        const double room = l ? s.width() - border : border;  // to the frame's edge
+        const double depth = std::clamp(room / 2, 4.0, 60.0);
+        const double column = l ? border + depth : border - depth;
+        const std::vector<double> profile =
+            verticalProfile(lum, valid, column, s.horizon_y_px, o.profile_half_columns);
+        const double chord = fallingEdge(profile, 1, static_cast<double>(profile.size()));
+        double radius = std::isfinite(chord) ? (chord * chord + depth * depth) / (2 * depth) : room;
+        radius = std::max(radius, room + 1);  // the other border lies beyond the frame
+        a0 = radius;
+        mx = l ? border + radius : border - radius;
+      }
+      half[i] = std::max(a0, 0.5);
+      middle[i] = mx;
+      const std::vector<double> profile =
+          verticalProfile(lum, valid, mx, s.horizon_y_px, o.profile_half_columns);
+      height[i] = fallingEdge(profile, o.min_height_fraction * a0, a0 / o.min_height_fraction);
+      // The middle's brightness over the outside's (where the borders are in the frame).
+      std::vector<double> outside;
+      if (l && xl[i] > 6) outside.push_back(meanOver(s, row, xl[i] - 5, xl[i] - 2));
+      if (r && xr[i] < s.width() - 6) outside.push_back(meanOver(s, row, xr[i] + 2, xr[i] + 5));
+      const double out_level = outside.empty() ? 0 : median(outside);
+      inside[i] = mx >= 0 && mx < s.width() ? meanOver(s, row, mx - 2, mx + 2) - out_level
+                                            : std::numeric_limits<double>::quiet_NaN();
+    }
+    height = smoothed(angles, height);
+    inside = smoothed(angles, inside);
+    c.seeds.resize(n);
+    for (int i = 0; i < n; ++i) {
+      model::GhostParameters& p = c.seeds[i];
+      p.channels = stack.channels;
+      p.center_x = middle[i];
+      p.center_y = s.horizon_y_px;
+      p.left = p.right = half[i];
+      p.height = std::isfinite(height[i]) && height[i] > 0.5 ? height[i] : half[i];
+      p.curvature_left = p.curvature_right = model::kEllipseCurvature;
+      const double ib = std::isfinite(c.step) ? c.step : 0;
+      const double ii = std::isfinite(inside[i]) ? std::max(inside[i], 0.0) : ib;
+      for (int ch = 0; ch < stack.channels; ++ch) {
+        p.border[ch] = ib;
+        p.inside[ch] = ii;
+      }
+      p.inside_falloff = std::max(1.0, 0.3 * std::min({p.left, p.right, p.height}));
+      p.inside_exponent = 1;
+      p.outside_falloff = o.seed_outside_falloff_px;
+      p.outside_exponent = 1;
+      p = model::clampToBounds(p);
+    }
+  });
+  return out;
+}
+
+std::vector<CentreSamples> centreSamples(const std::vector<GhostCandidate>& candidates,
+                                         const std::vector<BorderTrace>& traces,
+                                         const SweepImage& s) {
+  std::vector<CentreSamples> out;
+  for (const auto& c : candidates) {
+    if (c.left_trace < 0 || c.right_trace < 0) continue;
+    CentreSamples cs;
+    for (const auto& p : traces[c.left_trace].points)
+      if (const BorderPoint* q = traces[c.right_trace].at(p.row)) {
+        cs.angles_deg.push_back(s.angles_deg[p.row]);
+        cs.centre_x_px.push_back(0.5 * (p.x_px + q->x_px));
+      }
+    out.push_back(std::move(cs));
+  }
+  return out;
+}
+
+}  // namespace flarekit::fit

@@ -1,0 +1,73 @@
+#pragma once
+// Stage 4 of the fit (docs/fitting.md): ghosts from the border traces of the sweep image.
+//
+// A ghost is bounded on the horizon by a rising trace (its left border) and a falling one (its
+// right border). The model gives one outline value Ib to the whole outline, so both borders of one
+// ghost step by about the same amount in S (linear, where overlapping ghosts add): rising and
+// falling traces are paired by that step, left of right over the frames they share; and a ghost
+// keeps its size as it moves (paraxially exactly), so the two borders of a pair move alike. The
+// closest pair (steps, and the change of the distance between the borders) first, each trace in
+// one pair. Nested and overlapping ghosts give separate pairs.
+//
+// A trace left over is a ghost whose other border lies outside the frame when S stays raised by
+// its step from the trace to the frame's edge on the ghost's side (a large ghost at some angles);
+// otherwise it is an edge inside a ghost (a caustic's rim or fold) and no ghost of its own.
+//
+// Each ghost gets its angle range (its traces' frames) and, at every frame in it, a seed: Mx, L,
+// R from its borders (the unseen one from the other's distance to the ghost's middle, itself on
+// the model's odd curve about the optical axis where it can be), h from the vertical profile of
+// the frame through Mx (where it falls by the borders' step), Ib from the step, Ii from S in the
+// middle.
+
+#include <string>
+#include <vector>
+
+#include "fit/frames.h"
+#include "fit/sweep.h"
+#include "model/ghost_shape.h"
+
+namespace flarekit::fit {
+
+struct CandidateOptions {
+  int min_shared_rows = 3;          // a pair's traces share at least this many frames (≥ 1)
+  double max_step_ratio = 2.5;      // their steps differ by at most this factor (> 1)
+  double max_width_change_per_deg = 0.15;  // their distance changes by at most this fraction a degree
+  double single_significance = 20;  // a lone trace's significance to stand for a ghost (> 0)
+  double single_raised_fraction = 0.5;  // S stays this fraction of its step above the outside
+  int profile_half_columns = 2;     // columns averaged on each side of Mx for h (≥ 0)
+  double min_height_fraction = 0.3; // h is searched within [this, 1/this] × the half-width
+  double seed_outside_falloff_px = 2;  // Fo of the seeds, pixels (> 0)
+
+  bool IsValid(std::string* error) const;
+};
+
+struct GhostCandidate {
+  int id = 0;
+  int left_trace = -1, right_trace = -1;  // BorderTrace ids; −1 where that border is never seen
+  int first_row = 0, last_row = 0;        // sweep rows (the stack's frames) it is present in
+  std::vector<model::GhostParameters> seeds;  // one per row first_row..last_row
+  double step = 0;                        // median step of its borders in S (linear radiance)
+
+  bool present(int row) const { return row >= first_row && row <= last_row; }
+  const model::GhostParameters& seed(int row) const { return seeds[row - first_row]; }
+};
+
+struct CandidateSummary {
+  int pairs = 0;          // ghosts with both borders seen
+  int single = 0;         // ghosts from one border
+  int traces_unused = 0;  // traces that are neither (inner edges)
+};
+
+// The ghosts of the capture from its traces. `stack` gives the frames for the vertical profiles,
+// `horizon_y_px` the mirror axis My of every seed.
+std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const SweepImage& sweep,
+                                                const std::vector<BorderTrace>& traces,
+                                                const CandidateOptions& options = {},
+                                                CandidateSummary* summary = nullptr);
+
+// Each candidate's centre samples where both its borders are seen: for measureOpticalZero.
+std::vector<CentreSamples> centreSamples(const std::vector<GhostCandidate>& candidates,
+                                         const std::vector<BorderTrace>& traces,
+                                         const SweepImage& sweep);
+
+}  // namespace flarekit::fit

@@ -1,0 +1,415 @@
+#include "fit/model_fit.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <map>
+
+#include <ceres/ceres.h>
+#include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
+
+#include "common/progress.h"
+#include "fit/normal_equations.h"
+#include "fit/polynomial.h"
+#include "model/model_renderer.h"
+
+namespace flarekit::fit {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// One ghost of the model while it is fitted: a scaled polynomial per parameter over its range.
+struct GhostCurves {
+  int id = 0;
+  double angle_min = 0, angle_max = 0;  // field angles
+  std::vector<ScaledPolynomial> parameters;
+  std::vector<int> offset;              // where each parameter's coefficients start in the block
+  std::vector<double> block;            // all coefficients, parameter after parameter
+
+  bool covers(double angle) const { return angle >= angle_min && angle <= angle_max; }
+  // The parameters at θ from the block's current coefficients, clamped to the model's bounds.
+  model::GhostParameters at(double angle, int channels, const double* coefficients) const {
+    std::vector<double> v(parameters.size());
+    for (size_t k = 0; k < parameters.size(); ++k) {
+      const double u = parameters[k].variable(angle);
+      const int n = static_cast<int>(parameters[k].coefficients.size());
+      double value = 0;
+      for (int m = n - 1; m >= 0; --m) value = value * u + coefficients[offset[k] + m];
+      v[k] = value;
+    }
+    return model::clampToBounds(model::fromParameterVector(v, channels));
+  }
+  void storeBlock() {
+    block.clear();
+    offset.clear();
+    for (const auto& p : parameters) {
+      offset.push_back(static_cast<int>(block.size()));
+      block.insert(block.end(), p.coefficients.begin(), p.coefficients.end());
+    }
+  }
+  void loadBlock() {
+    for (size_t k = 0; k < parameters.size(); ++k)
+      std::copy_n(block.begin() + offset[k], parameters[k].coefficients.size(),
+                  parameters[k].coefficients.begin());
+  }
+};
+
+// The frames the refinement measures the model against.
+struct RefineFrame {
+  double angle = 0;                  // field angle
+  std::vector<int> ghosts;           // indices into the curves, present here
+  std::unique_ptr<FramePyramid> pyramid;
+  std::unique_ptr<GroupCost> cost;
+  std::unique_ptr<NormalEquations> normal;
+};
+
+// Renders every refinement frame at the coefficients and sums the normal equations of the
+// coefficients: a frame's JᵀJ over its ghosts' parameters, carried to their coefficients by the
+// polynomials' powers (the chain rule: ∂q/∂a_m = u^m).
+class ModelEquations {
+ public:
+  ModelEquations(std::vector<GhostCurves>& curves, std::vector<RefineFrame>& frames, int channels)
+      : curves_(curves), frames_(frames), channels_(channels) {
+    for (auto& c : curves_) {
+      start_.push_back(total_);
+      total_ += static_cast<int>(c.block.size());
+    }
+  }
+  int total() const { return total_; }
+  int start(int g) const { return start_[g]; }
+
+  void evaluate(bool with_jacobians) {
+    a_ = Eigen::MatrixXd::Zero(with_jacobians ? total_ : 0, with_jacobians ? total_ : 0);
+    b_ = Eigen::VectorXd::Zero(with_jacobians ? total_ : 0);
+    c_ = 0;
+    const int p = model::parameterCount(channels_);
+    for (auto& f : frames_) {
+      std::vector<model::GhostParameters> ghosts;
+      for (int g : f.ghosts) ghosts.push_back(curves_[g].at(f.angle, channels_, curves_[g].block.data()));
+      f.cost->evaluate(ghosts, with_jacobians);
+      f.normal->fill(with_jacobians);
+      c_ += f.normal->squaredNorm();
+      if (!with_jacobians) continue;
+      // The powers of each ghost's parameters here: T_g (p × its coefficients).
+      std::vector<Eigen::MatrixXd> t(f.ghosts.size());
+      for (size_t j = 0; j < f.ghosts.size(); ++j) {
+        const GhostCurves& c = curves_[f.ghosts[j]];
+        t[j] = Eigen::MatrixXd::Zero(p, static_cast<Eigen::Index>(c.block.size()));
+        for (int k = 0; k < p; ++k) {
+          if (k == model::param::kMy) continue;  // held on the horizon
+          const double u = c.parameters[k].variable(f.angle);
+          double power = 1;
+          for (size_t m = 0; m < c.parameters[k].coefficients.size(); ++m, power *= u)
+            t[j](k, c.offset[k] + static_cast<int>(m)) = power;
+        }
+      }
+      const Eigen::MatrixXd& a = f.normal->jtj();
+      const Eigen::VectorXd& b = f.normal->jtr();
+      for (size_t j = 0; j < f.ghosts.size(); ++j) {
+        const int gj = f.ghosts[j];
+        const auto n_j = t[j].cols();
+        b_.segment(start_[gj], n_j) += t[j].transpose() * b.segment(j * p, p);
+        for (size_t i = 0; i < f.ghosts.size(); ++i) {
+          const int gi = f.ghosts[i];
+          a_.block(start_[gj], start_[gi], n_j, t[i].cols()) +=
+              t[j].transpose() * a.block(j * p, i * p, p, p) * t[i];
+        }
+      }
+    }
+    if (with_jacobians) root_ = squareRootForm(a_, b_, c_);
+    with_jacobians_ = with_jacobians;
+  }
+  void squareRoot(double* residuals, double* const* jacobians) const {
+    if (!with_jacobians_) {
+      residuals[0] = std::sqrt(c_);
+      std::fill(residuals + 1, residuals + total_ + 1, 0.0);
+      return;
+    }
+    std::copy_n(root_.residuals.data(), total_, residuals);
+    residuals[total_] = root_.rest;
+    if (!jacobians) return;
+    for (size_t g = 0; g < curves_.size(); ++g) {
+      if (!jacobians[g]) continue;
+      const int n = static_cast<int>(curves_[g].block.size());
+      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> block(
+          jacobians[g], total_ + 1, n);
+      block.topRows(total_) = root_.jacobian.middleCols(start_[g], n);
+      block.row(total_).setZero();
+    }
+  }
+
+ private:
+  std::vector<GhostCurves>& curves_;
+  std::vector<RefineFrame>& frames_;
+  int channels_;
+  std::vector<int> start_;
+  int total_ = 0;
+  Eigen::MatrixXd a_;
+  Eigen::VectorXd b_;
+  double c_ = 0;
+  bool with_jacobians_ = false;
+  SquareRootForm root_;
+};
+
+// Renders the model once per evaluation point (as group_solver.cpp's callback does for a frame).
+class ModelCallback : public ceres::EvaluationCallback {
+ public:
+  ModelCallback(ModelEquations& equations, std::vector<GhostCurves>& curves)
+      : equations_(equations), curves_(curves) {}
+  void PrepareForEvaluation(bool evaluate_jacobians, bool new_point) override {
+    if (evaluated_ && !new_point && (!evaluate_jacobians || had_jacobians_)) return;
+    equations_.evaluate(evaluate_jacobians);
+    evaluated_ = true;
+    had_jacobians_ = evaluate_jacobians;
+  }
+
+ private:
+  ModelEquations& equations_;
+  std::vector<GhostCurves>& curves_;
+  bool evaluated_ = false, had_jacobians_ = false;
+};
+
+class ModelResidual : public ceres::CostFunction {
+ public:
+  ModelResidual(const ModelEquations& equations, const std::vector<GhostCurves>& curves)
+      : equations_(equations) {
+    set_num_residuals(equations.total() + 1);
+    for (const auto& c : curves) mutable_parameter_block_sizes()->push_back(static_cast<int>(c.block.size()));
+  }
+  bool Evaluate(double const* const*, double* residuals, double** jacobians) const override {
+    equations_.squareRoot(residuals, jacobians);
+    return true;
+  }
+
+ private:
+  const ModelEquations& equations_;
+};
+
+// The least level k whose frame of size/k fits within `pixels`.
+int levelWithin(cv::Size size, int pixels) {
+  return std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(size.area()) / pixels))));
+}
+
+// The pedestal of the whole frame `signed` (not clamped), for subtracting it.
+cv::Mat signedPedestal(const model::Pedestal& p, cv::Size size, int channels) {
+  cv::Mat out = cv::Mat::zeros(size, CV_32FC(channels));
+  if (p.empty()) return out;
+  for (int y = 0; y < size.height; ++y) {
+    float* row = out.ptr<float>(y);
+    for (int x = 0; x < size.width; ++x)
+      for (int c = 0; c < channels; ++c) row[x * channels + c] = static_cast<float>(p.at({x + 0.5, y + 0.5}, size, c));
+  }
+  return out;
+}
+
+// `p` as a polynomial that stays within parameter `index`'s bounds over [lo, hi] (where the model
+// file is checked): where it strays, the least-squares polynomial through its values clamped to
+// the bounds, of the highest degree that stays within them.
+model::Polynomial withinBounds(const ScaledPolynomial& p, int index, int channels, double lo, double hi) {
+  const model::ParameterBounds b = model::parameterBounds(index, channels);
+  constexpr int kChecks = 129;
+  auto inside = [&](const model::Polynomial& q) {
+    for (int i = 0; i < kChecks; ++i) {
+      const double v = q.evaluate(lo + (hi - lo) * i / (kChecks - 1));
+      if (!(v >= b.lower && v <= b.upper)) return false;
+    }
+    return true;
+  };
+  model::Polynomial e = p.expanded();
+  if (inside(e)) return e;
+  std::vector<double> angles, values;
+  for (int i = 0; i < kChecks; ++i) {
+    angles.push_back(lo + (hi - lo) * i / (kChecks - 1));
+    values.push_back(std::clamp(p.evaluate(angles.back()), b.lower, b.upper));
+  }
+  for (int degree = static_cast<int>(p.coefficients.size()) - 1; degree > 0; --degree) {
+    e = leastSquaresPolynomial(angles, values, degree);
+    if (inside(e)) return e;
+  }
+  std::sort(values.begin(), values.end());
+  return {{values[values.size() / 2]}};
+}
+
+}  // namespace
+
+bool ModelFitOptions::IsValid(std::string* error) const {
+  if (!cost.IsValid(error) || !pedestal_fit.IsValid(error)) return false;
+  auto fail = [&](const char* m) {
+    if (error) *error = m;
+    return false;
+  };
+  if (min_degree < 0 || max_degree < min_degree || max_degree > model::kMaxPolynomialDegree)
+    return fail("model fit: need 0 ≤ min_degree ≤ max_degree ≤ 10");
+  if (refine_frame_stride < 1) return fail("model fit: refine_frame_stride must be ≥ 1");
+  if (refine_pixels < 1000) return fail("model fit: refine_pixels must be ≥ 1000");
+  if (refine_iterations < 1) return fail("model fit: refine_iterations must be ≥ 1");
+  if (pedestal_degree < 0 || pedestal_degree > model::kMaxPolynomialDegree)
+    return fail("model fit: pedestal_degree must be 0–10");
+  if (pedestal_level < 1) return fail("model fit: pedestal_level must be ≥ 1");
+  return true;
+}
+
+model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandidate>& candidates,
+                           const std::vector<FrameFit>& fits, const OpticalZero& zero,
+                           double horizon_y_px, const ModelFitOptions& o, ModelFitSummary* summary) {
+  std::string error;
+  if (!o.IsValid(&error)) throw std::invalid_argument(error);
+  ModelFitSummary sum;
+  const int channels = stack.channels;
+  const int p = model::parameterCount(channels);
+  model::FlareModel m;
+  m.capture = stack.info;
+  m.capture.angle_zero_deg = zero.angle_zero_deg;
+  m.capture.optical_axis_px = cv::Point2d(zero.axis_x_px, horizon_y_px);
+  m.channels = channels;
+  const double half_step = 0.5 * (stack.info.angle_step_deg > 0 ? stack.info.angle_step_deg : 0);
+  const double capture_min = m.capture.fieldAngle(stack.frames.front().angle_deg);
+  const double capture_max = m.capture.fieldAngle(stack.frames.back().angle_deg);
+
+  // 1. Each parameter's robust polynomial over the frame fits, of the degree that predicts
+  // held-out fits best.
+  const auto t_poly = Clock::now();
+  std::map<int, std::pair<std::vector<double>, std::vector<model::GhostParameters>>> samples;
+  for (const auto& f : fits)
+    for (size_t j = 0; j < f.ghost_ids.size(); ++j) {
+      auto& s = samples[f.ghost_ids[j]];
+      s.first.push_back(m.capture.fieldAngle(f.angle_deg));
+      s.second.push_back(f.ghosts[j]);
+    }
+  std::vector<GhostCurves> curves;
+  for (const auto& c : candidates) {
+    auto it = samples.find(c.id);
+    if (it == samples.end() || it->second.first.empty()) continue;
+    const auto& [angles, ghosts] = it->second;
+    GhostCurves g;
+    g.id = c.id;
+    g.angle_min = std::max(capture_min, m.capture.fieldAngle(stack.frames[c.first_row].angle_deg) - half_step);
+    g.angle_max = std::min(capture_max, m.capture.fieldAngle(stack.frames[c.last_row].angle_deg) + half_step);
+    for (int k = 0; k < p; ++k) {
+      std::vector<double> values;
+      for (const auto& q : ghosts) values.push_back(model::toParameterVector(q)[k]);
+      int degree = k == model::param::kMy ? 0 : degreeByValidation(angles, values, o.min_degree, o.max_degree);
+      degree = std::min(degree, static_cast<int>(angles.size()) - 1);
+      const model::Polynomial poly =
+          k == model::param::kMy ? model::Polynomial{{horizon_y_px}} : robustPolynomial(angles, values, degree);
+      g.parameters.push_back(ScaledPolynomial::from(poly, g.angle_min, g.angle_max));
+    }
+    g.storeBlock();
+    curves.push_back(std::move(g));
+  }
+  sum.seconds_polynomials = since(t_poly);
+
+  // 2. The coefficients refined against the frames.
+  const auto t_refine = Clock::now();
+  if (o.refine && !curves.empty()) {
+    CostOptions cost = o.cost;
+    cost.prior_fraction = 0;
+    cost.max_pixels = o.refine_pixels;
+    cost.whole_frame = true;  // the ghosts move while refined: the region must not follow the seeds
+    const EdgeFilter edge(cost);
+    std::vector<RefineFrame> frames;
+    std::map<int, const FrameFit*> fit_of_frame;
+    for (const auto& f : fits) fit_of_frame[f.frame] = &f;
+    for (size_t i = 0; i < stack.frames.size(); i += o.refine_frame_stride) {
+      RefineFrame rf;
+      rf.angle = m.capture.fieldAngle(stack.frames[i].angle_deg);
+      for (size_t g = 0; g < curves.size(); ++g)
+        if (curves[g].covers(rf.angle)) rf.ghosts.push_back(static_cast<int>(g));
+      if (rf.ghosts.empty()) continue;
+      cv::Mat target = stack.frames[i].image;
+      if (auto it = fit_of_frame.find(static_cast<int>(i)); it != fit_of_frame.end())
+        target = target - signedPedestal(it->second->pedestal, stack.size, channels);
+      const double sigma = estimatePixelNoiseSigma(stack.frames[i].image, stack.frames[i].valid);
+      rf.pyramid = std::make_unique<FramePyramid>(target, stack.frames[i].valid, edge, sigma);
+      frames.push_back(std::move(rf));
+    }
+    // Each frame's cost over the whole frame at one level.
+    tbb::parallel_for(size_t{0}, frames.size(), [&](size_t i) {
+      RefineFrame& rf = frames[i];
+      std::vector<model::GhostParameters> seeds;
+      for (int g : rf.ghosts) seeds.push_back(curves[g].at(rf.angle, channels, curves[g].block.data()));
+      rf.cost = std::make_unique<GroupCost>(*rf.pyramid, edge, std::vector<model::GhostParameters>{}, seeds, cost);
+      rf.normal = std::make_unique<NormalEquations>(*rf.cost);
+    });
+    sum.refine_frames = static_cast<int>(frames.size());
+    ModelEquations equations(curves, frames, channels);
+    ModelCallback callback(equations, curves);
+    ceres::Problem::Options problem_options;
+    problem_options.evaluation_callback = &callback;
+    ceres::Problem problem(problem_options);
+    std::vector<double*> blocks;
+    for (auto& c : curves) blocks.push_back(c.block.data());
+    problem.AddResidualBlock(new ModelResidual(equations, curves), nullptr, blocks);
+    ceres::Solver::Options so;
+    so.minimizer_type = ceres::TRUST_REGION;
+    so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = o.refine_iterations;
+    so.num_threads = 1;
+    so.logging_type = ceres::SILENT;
+    so.function_tolerance = 1e-5;
+    ceres::Solver::Summary s;
+    ceres::Solve(so, &problem, &s);
+    sum.refine_iterations = static_cast<int>(s.iterations.size());
+    sum.refine_initial_cost = s.initial_cost;
+    sum.refine_final_cost = s.final_cost;
+    sum.refine_termination = ceres::TerminationTypeToString(s.termination_type);
+    for (auto& c : curves) c.loadBlock();
+  }
+  sum.seconds_refine = since(t_refine);
+
+  for (const auto& c : curves) {
+    model::GhostTrack t;
+    t.id = c.id;
+    t.angle_min_deg = c.angle_min;
+    t.angle_max_deg = c.angle_max;
+    for (size_t k = 0; k < c.parameters.size(); ++k)
+      t.parameters.push_back(withinBounds(c.parameters[k], static_cast<int>(k), channels, c.angle_min, c.angle_max));
+    m.ghosts.push_back(std::move(t));
+  }
+  sum.ghosts = static_cast<int>(m.ghosts.size());
+
+  // 3. The pedestal: what the model's ghosts leave of each frame, as polynomials.
+  const auto t_pedestal = Clock::now();
+  if (o.pedestal) {
+    const int k = o.pedestal_level;
+    std::vector<double> angles(stack.frames.size());
+    std::vector<model::Pedestal> pedestals(stack.frames.size());
+    std::vector<double> sigmas(stack.frames.size());
+    tbb::parallel_for(size_t{0}, stack.frames.size(), [&](size_t i) {
+      const Frame& f = stack.frames[i];
+      angles[i] = m.capture.fieldAngle(f.angle_deg);
+      const cv::Size size(stack.size.width / k, stack.size.height / k);
+      const cv::Rect whole(0, 0, size.width * k, size.height * k);
+      cv::Mat level, valid;
+      cv::resize(f.image(whole), level, size, 0, 0, cv::INTER_AREA);
+      cv::resize(f.valid(whole), valid, size, 0, 0, cv::INTER_AREA);
+      valid = valid >= 255;
+      std::vector<model::GhostParameters> ghosts;
+      for (const auto& g : m.ghostsAt(angles[i])) ghosts.push_back(g.parameters);
+      model::ViewTransform view;
+      view.scale = 1.0 / k;
+      const cv::Mat drawn = model::renderGhosts(ghosts, size, channels, {}, view);
+      sigmas[i] = estimatePixelNoiseSigma(f.image, f.valid);
+      pedestals[i] = fitPedestal(level - drawn, valid, stack.size, k, sigmas[i] / k, o.pedestal_fit);
+    });
+    model::PedestalTrack track;
+    track.angle_min_deg = capture_min;
+    track.angle_max_deg = capture_max;
+    for (int term = 0; term < model::kPedestalTerms * channels; ++term) {
+      std::vector<double> values;
+      for (const auto& q : pedestals) values.push_back(q.coefficients[term]);
+      track.terms.push_back(robustPolynomial(angles, values, std::min<int>(o.pedestal_degree, angles.size() - 1)));
+    }
+    m.pedestal = track;
+  }
+  sum.seconds_pedestal = since(t_pedestal);
+  if (summary) *summary = sum;
+  return m;
+}
+
+}  // namespace flarekit::fit

@@ -1,0 +1,58 @@
+#pragma once
+// Stage 6 of the fit (docs/fitting.md): the flare model from the frames.
+//
+// First each ghost's parameters become polynomials in the field angle θ − θ0 (the optical zero)
+// by robust least squares over its frame fits, each of the degree that predicts held-out fits
+// best. Then the coefficients themselves are refined against the frames directly, in one Ceres
+// problem whose parameter blocks are each ghost's coefficients and whose residuals are the
+// frames' pixels (a stride of frames, each at a level of its pyramid): the model is what is
+// scored, so it is what is optimised. Each frame's residuals are in units of its brightest
+// ghost's peak, as PSNR weighs a frame's error. The pedestal under the ghosts is fitted last, to
+// what the model's ghosts leave of every frame, and kept as polynomials too.
+
+#include <string>
+#include <vector>
+
+#include "fit/cost.h"
+#include "fit/frame_fit.h"
+#include "fit/frames.h"
+#include "fit/ghost_candidates.h"
+#include "fit/horizon.h"
+#include "fit/pedestal.h"
+#include "model/flare_model.h"
+
+namespace flarekit::fit {
+
+struct ModelFitOptions {
+  int min_degree = 1;                  // polynomial degrees tried by validation (≥ 0)
+  int max_degree = 4;                  // (min_degree … kMaxPolynomialDegree)
+  bool refine = true;                  // refine the coefficients against the frames
+  int refine_frame_stride = 3;         // the refinement uses every n-th frame of the capture (≥ 1)
+  int refine_pixels = 30000;           // each such frame at the first level within this many pixels
+  int refine_iterations = 10;          // Levenberg–Marquardt iterations of the refinement (≥ 1)
+  CostOptions cost;                    // the refinement's cost (its shape prior is not used)
+  bool pedestal = true;                // fit the model's pedestal
+  int pedestal_degree = 8;             // its polynomials' degree (the glow changes over the capture)
+  int pedestal_level = 2;              // fitted on k×k averages of each frame (≥ 1)
+  PedestalFitOptions pedestal_fit;
+
+  bool IsValid(std::string* error) const;
+};
+
+struct ModelFitSummary {
+  int ghosts = 0;
+  int refine_frames = 0;               // frames the refinement used
+  int refine_iterations = 0;
+  double refine_initial_cost = 0, refine_final_cost = 0;
+  std::string refine_termination;
+  double seconds_polynomials = 0, seconds_refine = 0, seconds_pedestal = 0;
+};
+
+// The model from the frame fits (`fits`, at frames of `stack`) of `candidates`. `info` is the
+// capture's metadata (written into the model with the optical zero and horizon).
+model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandidate>& candidates,
+                           const std::vector<FrameFit>& fits, const OpticalZero& zero,
+                           double horizon_y_px, const ModelFitOptions& options,
+                           ModelFitSummary* summary = nullptr);
+
+}  // namespace flarekit::fit
