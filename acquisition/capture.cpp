@@ -181,6 +181,13 @@ Json Session::newManifest() const {
               {"head", headName(rig_.head_driver)},
               {"camera", rig_.camera_driver == CameraDriver::kSimulated ? "simulated" : "gphoto2"},
               {"simulated", rig_.simulated()}};
+  // What a fit of the rig's imperfections is measured against; absent = an ideal rig.
+  const SimulationConfig& sim = rig_.simulation;
+  if (rig_.camera_driver == CameraDriver::kSimulated &&
+      (sim.optical_axis_offset_px != cv::Point2d(0, 0) || sim.angle_zero_offset_deg != 0.0))
+    m["rig"]["simulation"] = {
+        {"optical_axis_offset_px", {sim.optical_axis_offset_px.x, sim.optical_axis_offset_px.y}},
+        {"angle_zero_offset_deg", sim.angle_zero_offset_deg}};
   m["lens"] = {{"name", lens_name_},
                {"file", rig_.camera_driver == CameraDriver::kSimulated
                             ? rig_.simulation.lens.string()
@@ -242,6 +249,8 @@ void Session::checkResume(const Json& old) const {
   differs("number of dark frames", old["plan"]["dark_frames"], fresh["plan"]["dark_frames"]);
   differs("ISO", old["camera"]["iso"], fresh["camera"]["iso"]);
   differs("f-number", old["camera"]["f_number"], fresh["camera"]["f_number"]);
+  differs("rig's simulated axis offset or angle zero", old["rig"].value("simulation", Json()),
+          fresh["rig"].value("simulation", Json()));
 }
 
 template <class F>

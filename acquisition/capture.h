@@ -19,8 +19,12 @@
 //                                  frames' units and channels (main layer "Y" or "R","G","B")
 //                                  and one layer per rendered ghost, "ghost.<id>.Y" (or
 //                                  .R/.G/.B), same units; half precision (float when a value
-//                                  exceeds 60000), zip; attributes flarekit.angle_deg and
-//                                  flarekit.ghost.<id>.surfaces/.centroid_px/.bbox_px/.energy
+//                                  exceeds 60000), zip; attributes flarekit.angle_deg (the
+//                                  head's, as in the frame) and
+//                                  flarekit.ghost.<id>.surfaces/.centroid_px/.bbox_px/.energy;
+//                                  flarekit.true_angle_deg (the angle rendered) when the rig's
+//                                  angle_zero_offset_deg is not 0, and
+//                                  flarekit.optical_axis_offset_px when that is not (0, 0)
 //   DIR/darks/dark_K.exr         averaged dark frame for exposure K (float DN), --dark-frames
 //   DIR/raw/frame_NNNN_eK.dng    --keep-raw: the RAW exposures; DNG for Bayer sensors (levels and
 //                                  EXIF exposure inside), 16-bit PNG (.png) for mono sensors
@@ -28,7 +32,9 @@
 // ── manifest.json (format "flarekit.capture", version 1) ─────────────────────────────────────
 //   status            "in_progress" | "complete" | "interrupted" (Ctrl-C) | "failed" (+ "error")
 //   rig               {name, file (as given on the command line), head, camera: driver names,
-//                      simulated: bool}
+//                      simulated: bool, simulation?: {optical_axis_offset_px: [dx, dy],
+//                      angle_zero_offset_deg}} (simulation: a simulated camera's imperfections,
+//                      rig file [simulation]; present only when either is not 0)
 //   head              description of the rotation head
 //   lens              {name, file, focal_length_mm}  (name and file "" when the rig does not know
 //                      its lens; focal_length_mm, the simulated lens's paraxial EFL or the real

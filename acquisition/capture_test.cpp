@@ -154,6 +154,39 @@ TEST(Capture, WritesFramesTruthAndManifest) {
   EXPECT_EQ(again.frames_already_done, 5);
 }
 
+// A simulated rig's imperfections are recorded under rig.simulation (an ideal rig has none), the
+// frames keep the head's angles, and a resume with other imperfections is refused.
+TEST(Capture, ManifestRecordsTheSimulatedRigsImperfections) {
+  testing::TempDir dir;
+  Rig ideal = testRig();
+  RigDevices d = devices(ideal);
+  const CapturePlan plan = smallPlan(2);
+  runCapture(ideal, d, plan, dir.path() / "ideal");
+  EXPECT_FALSE(manifest(dir.path() / "ideal")["rig"].contains("simulation"));
+
+  Rig rig = testRig();
+  rig.simulation.optical_axis_offset_px = {7.25, -3.5};
+  rig.simulation.angle_zero_offset_deg = 1.5;
+  RigDevices e = devices(rig);
+  runCapture(rig, e, plan, dir.path() / "off");
+  expectEveryAngleOnce(dir.path() / "off", plan);  // the head's angles, in manifest and frames
+  const auto m = manifest(dir.path() / "off");
+  ASSERT_TRUE(m["rig"].contains("simulation"));
+  EXPECT_EQ(m["rig"]["simulation"]["optical_axis_offset_px"], nlohmann::json({7.25, -3.5}));
+  EXPECT_EQ(m["rig"]["simulation"]["angle_zero_offset_deg"], 1.5);
+  Rig other = rig;
+  other.simulation.angle_zero_offset_deg = 1.0;
+  CaptureOptions resume;
+  resume.resume = true;
+  try {
+    runCapture(other, e, plan, dir.path() / "off", resume);
+    ADD_FAILURE() << "resumed with another angle zero";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("angle zero"), std::string::npos) << error.what();
+  }
+  EXPECT_EQ(runCapture(rig, e, plan, dir.path() / "off", resume).frames_already_done, 3);
+}
+
 // A capture killed during its first manifest write leaves a stray temporary and no manifest; it is
 // started again without --resume, and the new capture clears the stray.
 TEST(Capture, AFreshCaptureRemovesTheStrayTemporariesOfAKilledOne) {

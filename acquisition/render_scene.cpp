@@ -41,6 +41,7 @@ class RenderScene : public SceneProvider {
     options_.light_irradiance = sim.light_irradiance;
     options_.starburst_radius_px = sim.starburst_radius_px;
     options_.max_ghosts = sim.max_ghosts;
+    options_.optical_axis_offset_px = sim.optical_axis_offset_px;
     options_.ghost_layers = true;
     std::string error;
     if (!options_.IsValid(&error))
@@ -63,6 +64,10 @@ class RenderScene : public SceneProvider {
     for (auto& layer : full.layers)
       if (mono) layer.image = luminance(layer.image);
     full.attributes["flarekit.truth"] = std::string("noise-free radiance from the renderer");
+    // The head's angle, as the frames carry it; the angle rendered beside it when they differ.
+    full.attributes["flarekit.angle_deg"] = angle_deg;
+    if (rig_.simulation.angle_zero_offset_deg != 0.0)
+      full.attributes["flarekit.true_angle_deg"] = trueAngleDeg(angle_deg);
     // The lens as the rig file names it, not where this machine found it: truth files must not
     // depend on the folder the capture ran in.
     full.attributes["flarekit.lens_file"] = rig_.simulation.lens.string();
@@ -78,15 +83,21 @@ class RenderScene : public SceneProvider {
     if (!cached_ || angle_deg != angle_ || f_number != f_number_) {
       render::FlareRenderOptions options = options_;
       options.f_number = f_number;
-      // θ > 0 moves the light's image to −x (shared/DESIGN.md): the head's angle is θ. One
-      // renderer for the whole capture: its frame buffers and triangle lists are reused.
+      // θ > 0 moves the light's image to −x (shared/DESIGN.md). One renderer for the whole
+      // capture: its frame buffers and triangle lists are reused.
       cached_ = false;
-      renderer_.render(lens_, render::LightDirection{angle_deg, 0.0}, options, &image_);
+      renderer_.render(lens_, render::LightDirection{trueAngleDeg(angle_deg), 0.0}, options,
+                       &image_);
       angle_ = angle_deg;
       f_number_ = f_number;
       cached_ = true;
     }
     return image_;
+  }
+
+  // The angle between the light and the optical axis when the head reports `head_angle_deg`.
+  double trueAngleDeg(double head_angle_deg) const {
+    return head_angle_deg - rig_.simulation.angle_zero_offset_deg;
   }
 
   Rig rig_;

@@ -10,7 +10,9 @@
 namespace flarekit::acquisition {
 
 // The renderer as a SceneProvider for the rig's [simulation] section. Radiance and truth of one
-// angle come from one render (cached), so truth/ matches the frames exactly.
+// angle come from one render (cached), so truth/ matches the frames exactly. The angle asked for
+// is the head's: the light is rendered at angle − angle_zero_offset_deg, on a sensor whose optical
+// axis meets the image optical_axis_offset_px from its centre.
 std::shared_ptr<SceneProvider> makeRenderScene(const Rig& rig);
 
 // render::exposeRaw with the rig's [sensor] section at the ISO asked for.

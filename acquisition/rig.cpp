@@ -36,6 +36,11 @@ int integerIn(const ConfigNode& n, std::string_view key, int fallback, long long
                 "], got " + std::to_string(v));
   return static_cast<int>(v);
 }
+std::string text(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
 int sign(const ConfigNode& n, std::string_view key, int fallback) {
   if (!n.has(key)) return fallback;
   std::string s = n[key].string();
@@ -174,7 +179,7 @@ void parseSensor(const ConfigNode& s, Rig& rig) {
 void parseSimulation(const ConfigNode& s, Rig& rig) {
   s.checkKnownKeys({"lens", "width_px", "height_px", "sensor_width_mm", "sensor_height_mm",
                     "grid_size", "spectral_samples", "light_irradiance", "starburst_radius_px",
-                    "max_ghosts", "seed"});
+                    "max_ghosts", "seed", "optical_axis_offset_px", "angle_zero_offset_deg"});
   auto& x = rig.simulation;
   x.lens = s["lens"].string();
   x.width_px = integerIn(s, "width_px", x.width_px, 8, 20000);
@@ -189,6 +194,23 @@ void parseSimulation(const ConfigNode& s, Rig& rig) {
   x.starburst_radius_px = nonNegative(s, "starburst_radius_px", x.starburst_radius_px);
   x.max_ghosts = integerIn(s, "max_ghosts", x.max_ghosts, 0, 100000);
   x.seed = static_cast<uint64_t>(integerIn(s, "seed", 1, 0, INT32_MAX));
+  if (s.has("optical_axis_offset_px")) {
+    const ConfigNode n = s["optical_axis_offset_px"];
+    const std::vector<double> v = n.numbers();  // each finite, or an error naming the element
+    if (v.size() != 2)
+      n.fail("must be [dx, dy] in pixels, got " + std::to_string(v.size()) + " numbers");
+    const double max_x = x.width_px / 4.0, max_y = x.height_px / 4.0;
+    if (std::abs(v[0]) > max_x || std::abs(v[1]) > max_y)
+      n.fail("must lie within a quarter of the image (|dx| ≤ " + text(max_x) + ", |dy| ≤ " +
+             text(max_y) + " px), got [" + text(v[0]) + ", " + text(v[1]) + "]");
+    x.optical_axis_offset_px = {v[0], v[1]};
+  }
+  if (s.has("angle_zero_offset_deg")) {
+    const double o = s["angle_zero_offset_deg"].number();
+    if (std::abs(o) > 5.0)
+      s["angle_zero_offset_deg"].fail("must be within ±5 degrees, got " + text(o));
+    x.angle_zero_offset_deg = o;
+  }
 }
 
 void parseLens(const ConfigNode& l, Rig& rig) {

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/core.hpp>
+
 #include "acquisition/device.h"
 
 namespace flarekit::acquisition {
@@ -97,6 +99,13 @@ struct SimulationConfig {
   double starburst_radius_px = 0;
   int max_ghosts = 0;
   uint64_t seed = 1;
+  // Imperfections of a real rig, for the fitter to measure. Where the optical axis meets the
+  // image, in pixels from its centre (x right, y down; |dx| ≤ W/4, |dy| ≤ H/4; default (0, 0)):
+  // FlareRenderOptions::optical_axis_offset_px.
+  cv::Point2d optical_axis_offset_px{0.0, 0.0};
+  // The head's reading at which the light is on the optical axis, degrees (|o| ≤ 5; default 0):
+  // the scene is rendered at θ − o while frames and manifest keep the head's θ.
+  double angle_zero_offset_deg = 0.0;
 };
 
 // The lens on a real rig's camera (a simulated rig's lens is its [simulation] prescription).

@@ -6,7 +6,12 @@
 
 #include <fstream>
 
+#include "common/exr.h"
+#include "common/image.h"
 #include "common/testing.h"
+#ifdef FLAREKIT_ACQUISITION_WITH_RENDER
+#include "acquisition/render_scene.h"
+#endif
 
 namespace flarekit::acquisition {
 namespace {
@@ -94,6 +99,121 @@ TEST(Rig, ErrorsNameFileKeyAndProblem) {
   // Every message is one line.
   EXPECT_EQ(e.find('\n'), std::string::npos);
 }
+
+// A simulated rig, small and quick: 160×107 pixels, the Heliar's three brightest ghosts.
+std::string simulatedRig(const std::string& simulation_keys) {
+  const std::string lens =
+      (std::filesystem::path(FLAREKIT_SOURCE_DIR) / "lenses/heliar_tronnier.json").string();
+  const std::string head = R"(
+name = "t"
+[head]
+driver = "simulated"
+[camera]
+driver = "simulated"
+[simulation]
+width_px = 160
+height_px = 107
+grid_size = 24
+max_ghosts = 3
+)";
+  return head + "lens = \"" + lens + "\"\n" + simulation_keys;
+}
+
+Rig loadRigText(const testing::TempDir& dir, const std::string& name, const std::string& text) {
+  std::ofstream(dir / name) << text;
+  return loadRig(dir / name);
+}
+
+TEST(Rig, SimulatedImperfectionsDefaultToAnIdealRig) {
+  testing::TempDir dir;
+  const Rig ideal = loadRigText(dir, "ideal.toml", simulatedRig(""));
+  EXPECT_EQ(ideal.simulation.optical_axis_offset_px, cv::Point2d(0, 0));
+  EXPECT_EQ(ideal.simulation.angle_zero_offset_deg, 0.0);
+  const Rig shipped = loadRig(kRigs / "sim-heliar.toml");
+  EXPECT_EQ(shipped.simulation.optical_axis_offset_px, cv::Point2d(0, 0));
+  EXPECT_EQ(shipped.simulation.angle_zero_offset_deg, 0.0);
+  const Rig off = loadRigText(
+      dir, "off.toml",
+      simulatedRig("optical_axis_offset_px = [7.25, -3.5]\nangle_zero_offset_deg = -1.5\n"));
+  EXPECT_EQ(off.simulation.optical_axis_offset_px, cv::Point2d(7.25, -3.5));
+  EXPECT_EQ(off.simulation.angle_zero_offset_deg, -1.5);
+  // At the limits: a quarter of the image, 5°.
+  const Rig limits = loadRigText(
+      dir, "limits.toml",
+      simulatedRig("optical_axis_offset_px = [-40, 26.75]\nangle_zero_offset_deg = 5\n"));
+  EXPECT_EQ(limits.simulation.optical_axis_offset_px, cv::Point2d(-40, 26.75));
+}
+
+TEST(Rig, BadSimulatedImperfectionsNameTheKey) {
+  const struct {
+    const char* keys;
+    const char* key;  // the key path the message names
+  } cases[] = {
+      {"optical_axis_offset_px = [nan, 0]\n", "simulation.optical_axis_offset_px[0]"},
+      {"optical_axis_offset_px = [0, inf]\n", "simulation.optical_axis_offset_px[1]"},
+      {"optical_axis_offset_px = [40.5, 0]\n", "simulation.optical_axis_offset_px"},  // > 160/4
+      {"optical_axis_offset_px = [0, -27]\n", "simulation.optical_axis_offset_px"},   // > 107/4
+      {"optical_axis_offset_px = [1, 2, 3]\n", "simulation.optical_axis_offset_px"},
+      {"optical_axis_offset_px = 3\n", "simulation.optical_axis_offset_px"},
+      {"angle_zero_offset_deg = 5.5\n", "simulation.angle_zero_offset_deg"},
+      {"angle_zero_offset_deg = -inf\n", "simulation.angle_zero_offset_deg"},
+      {"angle_zero_offset_deg = nan\n", "simulation.angle_zero_offset_deg"},
+      {"angle_zero_offset_deg = \"1\"\n", "simulation.angle_zero_offset_deg"},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.keys);
+    const std::string e = errorOf(simulatedRig(c.keys));
+    EXPECT_NE(e.find("bad.toml"), std::string::npos) << e;
+    EXPECT_NE(e.find(std::string(c.key) + ":"), std::string::npos) << e;
+    EXPECT_EQ(e.find('\n'), std::string::npos) << e;
+  }
+}
+
+#ifdef FLAREKIT_ACQUISITION_WITH_RENDER
+cv::Point2d lightImagePx(const ExrImage& truth) {
+  const cv::Vec2d p = std::get<cv::Vec2d>(truth.attributes.at("flarekit.light_image_px"));
+  return {p[0], p[1]};
+}
+
+// The head reports θ; the light stands at θ − angle_zero_offset_deg from the optical axis, so at
+// θ = offset it is on the axis. Frames and truth keep the head's θ.
+TEST(Rig, AngleZeroOffsetRendersTheLightAtTheTrueAngle) {
+  testing::TempDir dir;
+  const auto ideal = makeRenderScene(loadRigText(dir, "ideal.toml", simulatedRig("")));
+  const auto offset = makeRenderScene(
+      loadRigText(dir, "offset.toml", simulatedRig("angle_zero_offset_deg = 1.5\n")));
+  const double f_number = 4;
+  EXPECT_EQ(cv::norm(offset->radiance(5.0, f_number), ideal->radiance(3.5, f_number), cv::NORM_INF),
+            0.0);
+  const ExrImage truth = offset->truth(5.0, f_number);
+  EXPECT_EQ(numericAttribute(truth.attributes, "flarekit.angle_deg"), 5.0);
+  EXPECT_EQ(numericAttribute(truth.attributes, "flarekit.true_angle_deg"), 3.5);
+  EXPECT_EQ(lightImagePx(truth), lightImagePx(ideal->truth(3.5, f_number)));
+  EXPECT_EQ(cv::norm(truth.main(), ideal->truth(3.5, f_number).main(), cv::NORM_INF), 0.0);
+  EXPECT_EQ(ideal->truth(3.5, f_number).attributes.count("flarekit.true_angle_deg"), 0u);
+  const cv::Point2d on_axis = lightImagePx(offset->truth(1.5, f_number));
+  EXPECT_NEAR(on_axis.x, 80, 0.05);
+  EXPECT_NEAR(on_axis.y, 53.5, 0.05);
+}
+
+// The rig's optical axis offset reaches the renderer: the light's image and the truth's ghosts
+// move by (dx, dy).
+TEST(Rig, OpticalAxisOffsetMovesTheSimulatedFlare) {
+  testing::TempDir dir;
+  const auto ideal = makeRenderScene(loadRigText(dir, "ideal.toml", simulatedRig("")));
+  const auto offset = makeRenderScene(
+      loadRigText(dir, "offset.toml", simulatedRig("optical_axis_offset_px = [7.25, -3.5]\n")));
+  const ExrImage a = ideal->truth(3.0, 4), b = offset->truth(3.0, 4);
+  EXPECT_NEAR(lightImagePx(b).x - lightImagePx(a).x, 7.25, 1e-9);
+  EXPECT_NEAR(lightImagePx(b).y - lightImagePx(a).y, -3.5, 1e-9);
+  EXPECT_EQ(std::get<cv::Vec2d>(b.attributes.at("flarekit.optical_axis_offset_px")),
+            cv::Vec2d(7.25, -3.5));
+  EXPECT_EQ(a.attributes.count("flarekit.optical_axis_offset_px"), 0u);
+  // Truth and frames come from one render.
+  cv::Mat radiance = offset->radiance(3.0, 4);
+  EXPECT_EQ(cv::norm(luminance(radiance), b.main(), cv::NORM_INF), 0.0);
+}
+#endif
 
 }  // namespace
 }  // namespace flarekit::acquisition

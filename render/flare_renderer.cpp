@@ -87,6 +87,9 @@ bool FlareRenderOptions::IsValid(std::string* error) const {
   if (!(sensor_width_mm > 0 && sensor_height_mm > 0 && std::isfinite(sensor_width_mm) &&
         std::isfinite(sensor_height_mm)))
     return fail("sensor size must be positive");
+  if (!(std::abs(optical_axis_offset_px.x) <= width_px &&
+        std::abs(optical_axis_offset_px.y) <= height_px))
+    return fail("optical axis offset must be finite and at most the image size per axis");
   if (!(f_number >= 0 && std::isfinite(f_number))) return fail("f-number must be ≥ 0 (0 = the lens's own)");
   if (spectral_samples != 0 && (spectral_samples < 3 || spectral_samples > 200))
     return fail("wavelengths must be rgb (0) or 3..200 spectral samples");
@@ -334,6 +337,9 @@ void FlareRenderer::render(const Lens& lens, const LightDirection& light,
   a["flarekit.grid"] = options.grid_size;
   a["flarekit.pixel_pitch_mm"] = setup.mapping.pixel_pitch_mm;
   a["flarekit.sensor_mm"] = cv::Vec2d(options.sensor_width_mm, options.sensor_height_mm);
+  if (options.optical_axis_offset_px != cv::Point2d(0, 0))
+    a["flarekit.optical_axis_offset_px"] =
+        cv::Vec2d(options.optical_axis_offset_px.x, options.optical_axis_offset_px.y);
   a["flarekit.light_image_px"] = cv::Vec2d(out.light_image_px.x, out.light_image_px.y);
   a["flarekit.ghosts"] = summary.ghosts_rendered;
   a["flarekit.radiometric_unit"] =

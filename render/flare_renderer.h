@@ -17,11 +17,13 @@
 // colour-matching functions and converted to linear sRGB, normalised so that a spectrally flat
 // (equal-energy) light of relative irradiance 1 gives Y = 1.
 //
-// Geometry (shared/DESIGN.md, Conventions): the optical axis meets the image at (W/2, H/2),
-// pixel (i, j) is centred at (i + 0.5, j + 0.5), x right, y down, square pixels. θ > 0 moves the
-// light's image towards −x; the roll φ turns the light direction about the optical axis so the
-// light's image sits on the ray from the centre at 180° + φ measured counter-clockwise on screen
-// (positive φ turns the flare counter-clockwise as displayed, as model/ and predict/ do). The iris keeps its orientation (the camera does not roll).
+// Geometry (shared/DESIGN.md, Conventions): the optical axis meets the image at (W/2, H/2) (or
+// where FlareRenderOptions::optical_axis_offset_px moves it), pixel (i, j) is centred at
+// (i + 0.5, j + 0.5), x right, y down, square pixels. θ > 0 moves the light's image towards −x;
+// the roll φ turns the light direction about the optical axis so the light's image sits on the
+// ray from the axis at 180° + φ measured counter-clockwise on screen (positive φ turns the flare
+// counter-clockwise as displayed, as model/ and predict/ do). The iris keeps its orientation (the
+// camera does not roll).
 //
 // Threading: renderFlare may be called from several threads at once; each call uses TBB inside.
 // FlareRenderer (below) keeps its working memory between renders.
@@ -58,6 +60,11 @@ struct FlareRenderOptions {
   // pixel pitch = min(sensor_width_mm / width_px, sensor_height_mm / height_px).
   double sensor_width_mm = 36.0;
   double sensor_height_mm = 24.0;
+  // Principal point: where the optical axis meets the image, in pixels from the image centre
+  // (x right, y down; sub-pixel values work), as on a sensor whose centre sits (−dx, −dy) pixel
+  // pitches from the axis. Everything drawn moves with it. At most the image size per axis;
+  // default (0, 0) = the centre.
+  cv::Point2d optical_axis_offset_px{0.0, 0.0};
   // Working f-number; 0 = the lens's own stop opening. Larger values stop the iris down
   // (stopDown in render/lens.h); smaller than the widest opening is an error.
   double f_number = 0.0;
@@ -136,7 +143,8 @@ struct FlareImage {
   cv::Point2d light_image_px{0, 0};
   std::vector<GhostRecord> ghosts;  // rendered ghosts, brightest estimate first
   // flarekit.* metadata for the EXR header: lens, angle, roll, f-number, method, wavelengths,
-  // grid, pixel pitch, light image position, radiometric unit.
+  // grid, pixel pitch, light image position, radiometric unit, and the optical axis offset
+  // (flarekit.optical_axis_offset_px) when it is not (0, 0).
   ExrAttributes attributes;
   RenderSummary summary;
 };

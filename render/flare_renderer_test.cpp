@@ -41,6 +41,120 @@ TEST(FlareRenderer, InvalidOptionsAreInputErrors) {
   EXPECT_THROW(renderFlare(lens, {NAN, 0}, small()), InputError);
 }
 
+// A small frame with few ghosts for the optical axis tests.
+FlareRenderOptions tiny() {
+  FlareRenderOptions o;
+  o.width_px = 160;
+  o.height_px = 107;
+  o.max_ghosts = 4;
+  o.ghost_layers = true;
+  return o;
+}
+
+// Luminance centroid of a CV_32FC3 image (pixel centres at i + 0.5).
+cv::Point2d centroidPx(const cv::Mat& image) {
+  double sum = 0, sx = 0, sy = 0;
+  for (int y = 0; y < image.rows; ++y)
+    for (int x = 0; x < image.cols; ++x) {
+      const cv::Vec3f& p = image.at<cv::Vec3f>(y, x);
+      const double l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+      sum += l;
+      sx += l * (x + 0.5);
+      sy += l * (y + 0.5);
+    }
+  return {sx / sum, sy / sum};
+}
+
+bool insideFrame(const cv::Rect& box, const cv::Size& size) {
+  return box.x > 0 && box.y > 0 && box.br().x < size.width && box.br().y < size.height;
+}
+
+TEST(FlareRenderer, OpticalAxisOffsetIsValidated) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  FlareRenderOptions o = tiny();
+  EXPECT_EQ(o.optical_axis_offset_px, cv::Point2d(0, 0));
+  o.optical_axis_offset_px = {160, -107};  // a whole frame away: the axis may lie off the image
+  std::string error;
+  EXPECT_TRUE(o.IsValid(&error)) << error;
+  for (const cv::Point2d bad :
+       {cv::Point2d(NAN, 0), cv::Point2d(0, INFINITY), cv::Point2d(161, 0), cv::Point2d(0, -108)}) {
+    o.optical_axis_offset_px = bad;
+    EXPECT_FALSE(o.IsValid(&error)) << bad;
+    EXPECT_NE(error.find("optical axis offset"), std::string::npos) << error;
+    EXPECT_THROW(renderFlare(lens, {3, 0}, o), InputError) << bad;
+  }
+}
+
+// The optical axis meeting the image at (W/2 + dx, H/2 + dy) moves everything drawn by (dx, dy),
+// sub-pixel offsets too: the light's image and its starburst, and every ghost. The roll turns
+// the flare about the axis, so a rolled light moves by the same (dx, dy).
+TEST(FlareRenderer, OpticalAxisOffsetMovesTheWholeFlare) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  const cv::Point2d offset(7.25, -3.5);
+  for (RenderMethod method : {RenderMethod::kTiled, RenderMethod::kMatrix}) {
+    SCOPED_TRACE(method == RenderMethod::kTiled ? "tiled" : "matrix");
+    FlareRenderOptions o = tiny();
+    o.method = method;
+    const LightDirection light{2.5, 20};
+    const FlareImage centred = renderFlare(lens, light, o);
+    o.optical_axis_offset_px = offset;
+    const FlareImage moved = renderFlare(lens, light, o);
+    EXPECT_NEAR(moved.light_image_px.x - centred.light_image_px.x, offset.x, 1e-9);
+    EXPECT_NEAR(moved.light_image_px.y - centred.light_image_px.y, offset.y, 1e-9);
+    // The light's core (and its whole starburst, inside the frame in both) dominates the image.
+    const cv::Point2d core = centroidPx(moved.radiance) - centroidPx(centred.radiance);
+    EXPECT_NEAR(core.x, offset.x, 0.05);
+    EXPECT_NEAR(core.y, offset.y, 0.05);
+    // Every ghost layer that lies wholly inside the frame in both renders.
+    ASSERT_EQ(moved.ghosts.size(), centred.ghosts.size());
+    int compared = 0;
+    for (size_t i = 0; i < centred.ghosts.size(); ++i) {
+      const GhostRecord& a = centred.ghosts[i];
+      const GhostRecord& b = moved.ghosts[i];
+      ASSERT_EQ(a.id, b.id);
+      if (a.energy <= 0 || !insideFrame(a.bbox_px, a.image.size()) ||
+          !insideFrame(b.bbox_px, b.image.size()))
+        continue;
+      EXPECT_NEAR(b.centroid_px.x - a.centroid_px.x, offset.x, 0.05) << "ghost " << a.id;
+      EXPECT_NEAR(b.centroid_px.y - a.centroid_px.y, offset.y, 0.05) << "ghost " << a.id;
+      EXPECT_NEAR(b.energy, a.energy, 1e-3 * a.energy) << "ghost " << a.id;
+      ++compared;
+    }
+    EXPECT_GE(compared, 1);
+    const auto recorded = moved.attributes.find("flarekit.optical_axis_offset_px");
+    ASSERT_NE(recorded, moved.attributes.end());
+    EXPECT_EQ(std::get<cv::Vec2d>(recorded->second), cv::Vec2d(offset.x, offset.y));
+    EXPECT_EQ(centred.attributes.count("flarekit.optical_axis_offset_px"), 0u);
+  }
+}
+
+// A whole-pixel offset gives the same image shifted by whole pixels, away from the borders: the
+// sprites exactly; the tiled rasterizer up to its float vertex positions, which round differently
+// elsewhere on the image (a pixel centre on an edge two triangles share may take either's value).
+TEST(FlareRenderer, WholePixelAxisOffsetShiftsTheImage) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  const cv::Point offset(6, -4);
+  for (RenderMethod method : {RenderMethod::kTiled, RenderMethod::kMatrix}) {
+    SCOPED_TRACE(method == RenderMethod::kTiled ? "tiled" : "matrix");
+    FlareRenderOptions o = tiny();
+    o.method = method;
+    o.light_source = false;  // the ghosts' values, not the light's 10⁵ times brighter ones
+    const FlareImage centred = renderFlare(lens, {4, 0}, o);
+    o.optical_axis_offset_px = offset;
+    const FlareImage moved = renderFlare(lens, {4, 0}, o);
+    const cv::Rect inner(10, 10, o.width_px - 20, o.height_px - 20);
+    const cv::Mat a = centred.radiance(inner), b = moved.radiance(inner + offset);
+    double peak;
+    cv::minMaxLoc(a.reshape(1), nullptr, &peak);
+    ASSERT_GT(peak, 0);
+    EXPECT_LT(cv::norm(a, b, cv::NORM_L1), 1e-4 * cv::norm(a, cv::NORM_L1));
+    EXPECT_LT(cv::norm(a, b, cv::NORM_INF), 1e-2 * peak);
+    if (method == RenderMethod::kMatrix) {
+      EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
+    }
+  }
+}
+
 TEST(FlareRenderer, LightImageFollowsTheAngleConventions) {
   const Lens lens = lensNamed("heliar_tronnier.json");
   FlareRenderOptions o = small();

@@ -170,6 +170,7 @@ void aimSetup(RenderSetup& s, const LightDirection& light, const FlareRenderOpti
   s.mapping.height_px = options.height_px;
   s.mapping.pixel_pitch_mm = std::min(options.sensor_width_mm / options.width_px,
                                       options.sensor_height_mm / options.height_px);
+  s.mapping.axis_offset_px = options.optical_axis_offset_px;
   s.direction = lightDirection(light.angle_deg * M_PI / 180.0, light.roll_deg * M_PI / 180.0);
   s.light_irradiance = options.light_irradiance;
   s.aperture = Aperture(options.aperture);

@@ -48,12 +48,18 @@ struct RasterTriangle {
   int batch;                       // which (ghost, wavelength) it came from
 };
 
-// How a traced grid maps to pixels.
+// How a traced grid maps to pixels: sensor millimetres from the optical axis to pixel
+// coordinates, the axis at the image centre plus axis_offset_px.
 struct SensorMapping {
   int width_px = 0, height_px = 0;
   double pixel_pitch_mm = 0.0;
-  double toPixelX(double x_mm) const { return width_px * 0.5 + x_mm / pixel_pitch_mm; }
-  double toPixelY(double y_mm) const { return height_px * 0.5 + y_mm / pixel_pitch_mm; }
+  cv::Point2d axis_offset_px{0.0, 0.0};  // FlareRenderOptions::optical_axis_offset_px
+  double toPixelX(double x_mm) const {
+    return width_px * 0.5 + axis_offset_px.x + x_mm / pixel_pitch_mm;
+  }
+  double toPixelY(double y_mm) const {
+    return height_px * 0.5 + axis_offset_px.y + y_mm / pixel_pitch_mm;
+  }
 };
 
 // Builds the triangles of a traced grid. `cell_flux` = E_in × the beam cross-section of one
