@@ -165,7 +165,9 @@ void registerFitEval(CLI::App& app) {
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
       "fit-eval", "Compare a fitted model with a capture and, where truth/ exists, with the ground "
-                  "truth: PSNR, centroid errors, detection recall and precision");
+                  "truth: PSNR (of the frame and over each ghost's support), centroid errors (px and "
+                  "% of the ghost's radius), flux errors, detection recall and precision, track "
+                  "continuity, model ghosts on the light");
   cmd->add_option("MODEL", o->model,
                   "Model file (model.json), or the per-frame fits of a fit's report (REPORT/frame_fits.json)")
       ->required();

@@ -4,7 +4,8 @@
 # For each lens (tests/data/fit/sim-<lens>-640.toml, 0–30° at 0.2°, simulated on first use) and
 # each edge weight λ, fits the capture with a report, then rates the model and the report's
 # per-frame fits against the ground truth with fit-eval. Prints one line per fit and, per lens,
-# the mean and the range over the λ of recall / precision / median PSNR / median centroid error.
+# the mean and the range over the λ of recall / precision / median PSNR / median centroid error
+# (px, and % of the ghost's radius) / median flux error / continuity.
 #
 # Why several λ: the fitter's discrete decisions (a detection kept or not, a track ended a frame
 # sooner) amplify small changes, and λ × 0.99 against λ × 1.01 moves one lens's recall by 10
@@ -43,10 +44,18 @@ command -v jq >/dev/null || { echo "fit_accuracy.sh: needs jq (scripts/setup.sh 
 
 eval_args=()
 ((holdout)) && eval_args=(--frames odd)
-# One line of figures from a fit-eval JSON: recall % precision % PSNR dB centroid px.
-figures() { jq -r '[100 * .recall, 100 * .precision, .median_psnr_db, .median_centroid_error_px] | @tsv' "$1"; }
+# One line of figures from a fit-eval JSON: recall % precision % PSNR dB centroid px centroid %
+# flux error % continuity (null, where fit-eval has none, as nan).
+columns=7
+figures() {
+  jq -r 'def pct: if . == null then null else 100 * . end;
+         [(.recall | pct), (.precision | pct), .median_psnr_db, .median_centroid_error_px,
+          .median_centroid_error_pct, (.median_flux_error | pct), .continuity]
+         | map(if . == null then "nan" else . end) | @tsv' "$1"
+}
 
-echo "recall % / precision % / median PSNR dB / median centroid error px (fit-eval against the truth)"
+echo "recall % / precision % / median PSNR dB / median centroid error px / median centroid error %" \
+  "of radius / median flux error % / continuity (fit-eval against the truth)"
 for lens in $lenses; do
   capture=$out/captures/$lens-640
   if [[ ! -f $capture/manifest.json ]]; then
@@ -68,20 +77,33 @@ for lens in $lenses; do
       line+=$'\t'"$(figures "$run/eval_frames.json")"
     fi
     seconds=$(jq -r '.seconds_total | . * 10 | round / 10' "$run/report/summary.json")
-    awk -v head="$lens λ×$lambda" -v seconds="$seconds" '{
-      printf "%s: model %.1f/%.1f/%.1f/%.1f", head, $1, $2, $3, $4
-      if (NF > 4) printf ", frame fits %.1f/%.1f/%.1f/%.1f", $5, $6, $7, $8
-      printf ", %s s\n", seconds }' <<<"$line"
+    awk -v head="$lens λ×$lambda" -v seconds="$seconds" -v m="$columns" '
+      function part(from,    k, t) {
+        for (k = 0; k < m; ++k) t = t (k ? "/" : "") ($(from + k) == "nan" ? "–" : sprintf(k == m - 1 ? "%.2f" : "%.1f", $(from + k)))
+        return t
+      }
+      {
+        printf "%s: model %s", head, part(1)
+        if (NF > m) printf ", frame fits %s", part(m + 1)
+        printf ", %s s\n", seconds
+      }' <<<"$line"
     rows+=("$line")
   done
-  # Mean and range over the λ of each column (model; then the frames' own fits).
-  printf '%s\n' "${rows[@]}" | awk -v lens="$lens" -v n="$(wc -w <<<"$lambdas")" '
-    { for (i = 1; i <= NF; ++i) { s[i] += $i; if (NR == 1 || $i < lo[i]) lo[i] = $i; if (NR == 1 || $i > hi[i]) hi[i] = $i } }
+  # Mean and range over the λ of each column (model; then the frames' own fits), over the fits
+  # that have a value there.
+  printf '%s\n' "${rows[@]}" | awk -v lens="$lens" -v n="$(wc -w <<<"$lambdas")" -v m="$columns" '
+    { for (i = 1; i <= NF; ++i) if ($i != "nan") {
+        s[i] += $i; ++c[i]; if (!(i in lo) || $i < lo[i]) lo[i] = $i; if (!(i in hi) || $i > hi[i]) hi[i] = $i } }
     END {
-      for (part = 0; part * 4 < NF; ++part) {
+      split("recall % | precision % | PSNR dB | centroid px | centroid % | flux error % | continuity", name, " [|] ")
+      for (part = 0; part * m < NF; ++part) {
         printf "%s mean over %d λ, %s: ", lens, n, part == 0 ? "model" : "frame fits"
-        split("recall % | precision % | PSNR dB | centroid px", name, " [|] ")
-        for (k = 1; k <= 4; ++k) { i = part * 4 + k; printf "%s %.1f (%.1f–%.1f)%s", name[k], s[i] / NR, lo[i], hi[i], k < 4 ? ", " : "\n" }
+        for (k = 1; k <= m; ++k) {
+          i = part * m + k; f = k == m ? "%.2f" : "%.1f"
+          if (c[i]) printf "%s " f " (" f "–" f ")", name[k], s[i] / c[i], lo[i], hi[i]
+          else printf "%s –", name[k]
+          printf(k < m ? ", " : "\n")
+        }
       }
     }'
 done

@@ -67,21 +67,9 @@ Blob describe(const cv::Mat& lum, cv::Point offset) {
   return b;
 }
 
-// The noise floor of a frame from its noise image (frame − noise-free radiance): 1.4826 × the
-// median absolute deviation over valid pixels, i.e. the noise of the typical (background) pixel.
-// The RMS would be ruled by the shot noise of the few bright pixels around the light's core
-// (Heliar 640×427 at 4.2°: RMS 3.7e-5, MAD-based 4.0e-6 where the background's noise is), and
-// set the visibility level of every ghost in the frame by the light's brightness.
-double noiseFloor(const cv::Mat& noise, const cv::Mat& valid) {
-  std::vector<float> v;
-  v.reserve(noise.total());
-  for (int y = 0; y < noise.rows; ++y) {
-    const float* d = noise.ptr<float>(y);
-    const uchar* ok = valid.ptr<uchar>(y);
-    for (int x = 0; x < noise.cols; ++x)
-      if (ok[x] && std::isfinite(d[x])) v.push_back(d[x]);
-  }
-  if (v.empty()) return 0;
+// 1.4826 × the median absolute deviation of `values` (NaN when empty).
+double robustSigma(std::vector<float>& v) {
+  if (v.empty()) return kNaN;
   auto median = [](std::vector<float>& a) {
     std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
     return static_cast<double>(a[a.size() / 2]);
@@ -107,21 +95,26 @@ double psnr(const cv::Mat& a, const cv::Mat& reference, const cv::Mat& mask) {
 
 // A frame's ground truth as the measures here read it.
 struct FrameTruth {
-  double noise_sigma = 0;          // noiseFloor of frame − noise-free radiance
+  double noise_sigma = 0;          // noiseFloor of frame − noise-free luminance
+  double pixel_noise_sigma = 0;    // the same per pixel (block 1)
   std::vector<GhostTruth> ghosts;  // each ghost's own layer
   cv::Mat flare;                   // the noise-free flare: the sum of the ghosts' luminance
+  cv::Mat light;                   // the light's own image: noise-free luminance − flare
 };
 
-FrameTruth readFrameTruth(const Frame& f, const cv::Mat& frame_lum) {
+FrameTruth readFrameTruth(const Frame& f, const cv::Mat& frame_lum, int noise_block_px) {
   FrameTruth truth;
   cv::Mat radiance = readExrLayer(f.truth_file, "");
   cv::patchNaNs(radiance, 0);
+  const cv::Mat radiance_lum = luminance(radiance);
   cv::Mat noise;
-  cv::subtract(frame_lum, luminance(radiance), noise, cv::noArray(), CV_32F);
-  truth.noise_sigma = noiseFloor(noise, f.valid);
+  cv::subtract(frame_lum, radiance_lum, noise, cv::noArray(), CV_32F);
+  truth.noise_sigma = noiseFloor(noise, f.valid, noise_block_px);
+  truth.pixel_noise_sigma = noiseFloor(noise, f.valid, 1);
   truth.ghosts = readGhostTruth(f.ghosts_file);
   truth.flare = cv::Mat::zeros(frame_lum.size(), CV_32F);
   for (const auto& g : truth.ghosts) truth.flare += luminance(g.image);
+  cv::subtract(radiance_lum, truth.flare, truth.light, cv::noArray(), CV_32F);
   return truth;
 }
 
@@ -141,8 +134,9 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
   const cv::Mat frame_lum = luminance(f.image);
   FrameTruth truth;
   if (stack.has_truth) {
-    truth = readFrameTruth(f, frame_lum);
+    truth = readFrameTruth(f, frame_lum, options.noise_block_px);
     fe.noise_sigma = truth.noise_sigma;
+    fe.pixel_noise_sigma = truth.pixel_noise_sigma;
   } else {
     fe.noise_sigma = estimatePixelNoiseSigma(f.image, f.valid);
   }
@@ -215,8 +209,19 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
     ++fe.true_ghosts_visible;
     if (true_match[t] >= 0) {
       ++fe.true_ghosts_found;
-      const double e = cv::norm(true_blobs[t].centroid - model_blobs[true_match[t]].centroid);
-      fe.matched.push_back({true_blobs[t].id, model_blobs[true_match[t]].id, true_blobs[t].radius, e});
+      const size_t k = static_cast<size_t>(true_match[t]);
+      FrameEvaluation::Matched m;
+      m.true_id = true_blobs[t].id;
+      m.model_id = model_blobs[k].id;
+      m.radius_px = true_blobs[t].radius;
+      m.centroid_error_px = cv::norm(true_blobs[t].centroid - model_blobs[k].centroid);
+      m.centroid_error_pct = m.radius_px > 0 ? 100 * m.centroid_error_px / m.radius_px : kNaN;
+      // Flux: the ghost's luminance summed over the image, as describe() counts it (light ≥ 0).
+      const double true_flux = cv::sum(cv::max(true_images[t], 0.0f))[0];
+      const double model_flux = cv::sum(cv::max(model_images[k], 0.0f))[0];
+      m.flux_error = true_flux > 0 ? std::abs(model_flux - true_flux) / true_flux : kNaN;
+      m.psnr_db = psnr(model_lum, truth.flare, (true_images[t] > fe.noise_sigma) & (f.valid > 0));
+      fe.matched.push_back(m);
     } else {
       fe.missed_true_ids.push_back(true_blobs[t].id);
       FrameEvaluation::Missed miss;
@@ -234,6 +239,7 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
       fe.missed.push_back(miss);
     }
   }
+  const cv::Mat light_region = truth.light > options.light_factor * fe.noise_sigma;
   for (size_t k = 0; k < model_blobs.size(); ++k) {
     if (model_match[k] >= 0) {
       ++fe.model_ghosts_matched;
@@ -253,7 +259,15 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
         u.true_id = true_blobs[t].id;
       }
     }
+    // On the light's core or starburst (FrameEvaluation::Unmatched::onLight).
+    const cv::Point2d c = model_blobs[k].centroid;
+    const cv::Point pixel(static_cast<int>(std::floor(c.x)), static_cast<int>(std::floor(c.y)));
+    u.centroid_on_light = image.contains(pixel) && light_region.at<uchar>(pixel) > 0;
+    cv::Mat on_light = cv::Mat::zeros(drawn.size(), CV_32F);
+    drawn.copyTo(on_light, light_region(model_boxes[k]));
+    u.fraction_on_light = total > 0 ? cv::sum(on_light)[0] / total : 0;
     if (u.piece()) ++fe.model_ghosts_pieces;
+    if (u.onLight()) ++fe.light_ghosts;
     fe.unmatched.push_back(u);
   }
   return fe;
@@ -298,6 +312,8 @@ bool EvaluationOptions::IsValid(std::string* error) const {
   if (!(visible_factor > 0)) return fail("visible_factor must be > 0");
   if (!(match_fraction > 0)) return fail("match_fraction must be > 0");
   if (!(min_match_px > 0)) return fail("min_match_px must be > 0");
+  if (!(light_factor > 0)) return fail("light_factor must be > 0");
+  if (noise_block_px < 1) return fail("noise_block_px must be ≥ 1");
   return true;
 }
 
@@ -312,11 +328,51 @@ double medianOf(std::vector<double> v) {
   return 0.5 * (*std::max_element(v.begin(), v.begin() + middle) + v[middle]);
 }
 
-double FrameEvaluation::medianCentroidErrorPx() const {
-  std::vector<double> errors;
-  for (const auto& m : matched) errors.push_back(m.centroid_error_px);
-  return medianOf(errors);
+double noiseFloor(const cv::Mat& noise, const cv::Mat& valid, int block_px) {
+  CV_Assert(noise.type() == CV_32FC1 && valid.type() == CV_8UC1 && noise.size() == valid.size());
+  CV_Assert(block_px >= 1);
+  const int k = block_px;
+  std::vector<float> means;
+  means.reserve(noise.total() / (k * k));
+  for (int y0 = 0; y0 + k <= noise.rows; y0 += k)
+    for (int x0 = 0; x0 + k <= noise.cols; x0 += k) {
+      double sum = 0;
+      bool whole = true;
+      for (int y = y0; y < y0 + k && whole; ++y) {
+        const float* d = noise.ptr<float>(y);
+        const uchar* ok = valid.ptr<uchar>(y);
+        for (int x = x0; x < x0 + k; ++x) {
+          if (!ok[x] || !std::isfinite(d[x])) {
+            whole = false;
+            break;
+          }
+          sum += d[x];
+        }
+      }
+      if (whole) means.push_back(static_cast<float>(sum / (k * k)));
+    }
+  if (means.empty()) return 0;
+  // The mean of k² independent values of σ has σ / k.
+  return k * robustSigma(means);
 }
+
+namespace {
+template <class Field>
+double medianOver(const std::vector<FrameEvaluation::Matched>& matched, Field field) {
+  std::vector<double> values;
+  for (const auto& m : matched) values.push_back(m.*field);
+  return medianOf(values);
+}
+}  // namespace
+
+double FrameEvaluation::medianCentroidErrorPx() const {
+  return medianOver(matched, &Matched::centroid_error_px);
+}
+double FrameEvaluation::medianCentroidErrorPct() const {
+  return medianOver(matched, &Matched::centroid_error_pct);
+}
+double FrameEvaluation::medianFluxError() const { return medianOver(matched, &Matched::flux_error); }
+double FrameEvaluation::medianGhostPsnrDb() const { return medianOver(matched, &Matched::psnr_db); }
 
 Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const FrameStack& stack,
                           const EvaluationOptions& options) {
@@ -330,24 +386,31 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
   });
   Evaluation ev;
   ev.has_truth = stack.has_truth;
-  std::vector<double> psnrs, capture_psnrs, errors;
+  std::vector<double> psnrs, capture_psnrs, errors, errors_pct, flux_errors, ghost_psnrs;
   for (auto& fe : evaluated) {
     if (!fe) continue;
     capture_psnrs.push_back(fe->capture_psnr_db);
     if (stack.has_truth) psnrs.push_back(fe->psnr_db);
-    for (const auto& m : fe->matched) errors.push_back(m.centroid_error_px);
+    for (const auto& m : fe->matched) {
+      errors.push_back(m.centroid_error_px);
+      errors_pct.push_back(m.centroid_error_pct);
+      flux_errors.push_back(m.flux_error);
+      ghost_psnrs.push_back(m.psnr_db);
+    }
     ev.true_ghosts_visible += fe->true_ghosts_visible;
     ev.true_ghosts_found += fe->true_ghosts_found;
     ev.model_ghosts += fe->model_ghosts;
     ev.model_ghosts_matched += fe->model_ghosts_matched;
     ev.glare_ghosts += fe->glare_ghosts;
     ev.model_ghosts_pieces += fe->model_ghosts_pieces;
+    ev.light_ghosts += fe->light_ghosts;
     ev.frames.push_back(std::move(*fe));
   }
   // Per true ghost, over the frames.
   struct Seen {
     TrueGhostSummary summary;
     std::vector<double> radii, missed_peaks;
+    std::map<int, int> frames_by_model_id;  // the frames each model ghost matched it in
   };
   std::map<int, Seen> seen;
   for (const auto& fe : ev.frames) {
@@ -356,6 +419,7 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
       ++s.summary.frames_visible;
       ++s.summary.frames_found;
       s.radii.push_back(m.radius_px);
+      ++s.frames_by_model_id[m.model_id];
     }
     for (const auto& m : fe.missed) {
       Seen& s = seen[m.id];
@@ -369,15 +433,28 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
   for (const auto& fe : ev.frames)
     for (const auto& u : fe.unmatched)
       if (auto it = seen.find(u.true_id); u.piece() && it != seen.end()) ++it->second.summary.unmatched_pieces;
+  double continuity_sum = 0;
   for (auto& [id, s] : seen) {
     s.summary.id = id;
     s.summary.median_radius_px = medianOf(s.radii);
     s.summary.missed_median_peak_sigma = medianOf(s.missed_peaks);
+    int most = 0;
+    for (const auto& [model_id, n] : s.frames_by_model_id)
+      if (n > most) {
+        most = n;
+        s.summary.continuity_model_id = model_id;
+      }
+    s.summary.continuity = double(most) / s.summary.frames_visible;
+    continuity_sum += s.summary.continuity;
     ev.true_ghosts.push_back(s.summary);
   }
   ev.median_psnr_db = medianOf(psnrs);
   ev.median_capture_psnr_db = medianOf(capture_psnrs);
   ev.median_centroid_error_px = medianOf(errors);
+  ev.median_centroid_error_pct = medianOf(errors_pct);
+  ev.median_flux_error = medianOf(flux_errors);
+  ev.median_ghost_psnr_db = medianOf(ghost_psnrs);
+  ev.continuity = seen.empty() ? kNaN : continuity_sum / seen.size();
   ev.recall = ev.true_ghosts_visible ? double(ev.true_ghosts_found) / ev.true_ghosts_visible : kNaN;
   ev.precision = ev.model_ghosts ? double(ev.model_ghosts_matched) / ev.model_ghosts : kNaN;
   return ev;
@@ -424,7 +501,10 @@ nlohmann::json matched(const FrameEvaluation& f) {
     a.push_back({{"true_id", m.true_id},
                  {"model_id", m.model_id},
                  {"radius_px", m.radius_px},
-                 {"centroid_error_px", m.centroid_error_px}});
+                 {"centroid_error_px", m.centroid_error_px},
+                 {"centroid_error_pct", number(m.centroid_error_pct)},
+                 {"flux_error", number(m.flux_error)},
+                 {"psnr_db", number(m.psnr_db)}});
   return a;
 }
 
@@ -434,7 +514,10 @@ nlohmann::json unmatched(const FrameEvaluation& f) {
     a.push_back({{"model_id", u.model_id},
                  {"true_id", u.true_id},
                  {"fraction_in_true", u.fraction_in_true},
-                 {"piece", u.piece()}});
+                 {"piece", u.piece()},
+                 {"fraction_on_light", u.fraction_on_light},
+                 {"centroid_on_light", u.centroid_on_light},
+                 {"on_light", u.onLight()}});
   return a;
 }
 }  // namespace
@@ -446,6 +529,10 @@ nlohmann::json Evaluation::toJson() const {
   j["median_psnr_db"] = number(median_psnr_db);
   j["median_capture_psnr_db"] = number(median_capture_psnr_db);
   j["median_centroid_error_px"] = number(median_centroid_error_px);
+  j["median_centroid_error_pct"] = number(median_centroid_error_pct);
+  j["median_flux_error"] = number(median_flux_error);
+  j["median_ghost_psnr_db"] = number(median_ghost_psnr_db);
+  j["continuity"] = number(continuity);
   j["recall"] = number(recall);
   j["precision"] = number(precision);
   j["true_ghosts_visible"] = true_ghosts_visible;
@@ -454,10 +541,12 @@ nlohmann::json Evaluation::toJson() const {
   j["model_ghosts_matched"] = model_ghosts_matched;
   j["glare_ghosts"] = glare_ghosts;
   j["model_ghosts_pieces"] = model_ghosts_pieces;
+  j["light_ghosts"] = light_ghosts;
   nlohmann::json fs = nlohmann::json::array();
   for (const auto& f : frames) {
     fs.push_back({{"angle_deg", f.angle_deg},
                   {"noise_sigma", f.noise_sigma},
+                  {"pixel_noise_sigma", number(has_truth ? f.pixel_noise_sigma : kNaN)},
                   {"psnr_db", number(f.psnr_db)},
                   {"capture_psnr_db", number(f.capture_psnr_db)},
                   {"true_ghosts_visible", f.true_ghosts_visible},
@@ -466,11 +555,15 @@ nlohmann::json Evaluation::toJson() const {
                   {"model_ghosts_matched", f.model_ghosts_matched},
                   {"glare_ghosts", f.glare_ghosts},
                   {"median_centroid_error_px", number(f.medianCentroidErrorPx())},
+                  {"median_centroid_error_pct", number(f.medianCentroidErrorPct())},
+                  {"median_flux_error", number(f.medianFluxError())},
+                  {"median_ghost_psnr_db", number(f.medianGhostPsnrDb())},
                   {"missed_true_ids", f.missed_true_ids},
                   {"matched", matched(f)},
                   {"missed", missed(f)},
                   {"model_ghosts_pieces", f.model_ghosts_pieces},
                   {"unmatched", unmatched(f)},
+                  {"light_ghosts", f.light_ghosts},
                   {"ceiling_psnr_db", number(f.ceiling_psnr_db)}});
   }
   j["frames"] = fs;
@@ -483,7 +576,9 @@ nlohmann::json Evaluation::toJson() const {
                         {"frames_found", g.frames_found},
                         {"median_radius_px", number(g.median_radius_px)},
                         {"missed_median_peak_sigma", number(g.missed_median_peak_sigma)},
-                        {"unmatched_pieces", g.unmatched_pieces}};
+                        {"unmatched_pieces", g.unmatched_pieces},
+                        {"continuity", g.continuity},
+                        {"continuity_model_id", g.continuity_model_id}};
     e["missed_range_deg"] = g.frames_found < g.frames_visible
                                 ? nlohmann::json::array({g.missed_min_deg, g.missed_max_deg})
                                 : nlohmann::json(nullptr);
@@ -499,8 +594,11 @@ std::string Evaluation::BriefReport() const {
   s << frames.size() << " frame(s): ";
   if (has_truth)
     s << "median PSNR vs noise-free flare " << median_psnr_db << " dB, median centroid error "
-      << median_centroid_error_px << " px, recall " << 100 * recall << " % (" << true_ghosts_found
-      << "/" << true_ghosts_visible << "), precision " << 100 * precision << " % ("
+      << median_centroid_error_px << " px (" << median_centroid_error_pct
+      << " % of the ghost's radius), median flux error " << 100 * median_flux_error
+      << " %, median PSNR over each ghost's support " << median_ghost_psnr_db << " dB, recall "
+      << 100 * recall << " % (" << true_ghosts_found << "/" << true_ghosts_visible
+      << "), continuity " << continuity << ", precision " << 100 * precision << " % ("
       << model_ghosts_matched << "/" << model_ghosts << ", glare not counted: " << glare_ghosts
       << " in all frames); ";
   s << "median PSNR vs capture " << median_capture_psnr_db << " dB.";
@@ -533,6 +631,7 @@ std::string Evaluation::BriefReport() const {
     for (size_t i = 0; i < pieces.size(); ++i)
       s << (i == 0 ? " (ghost " : ", ghost ") << pieces[i].id << ": " << pieces[i].unmatched_pieces;
     s << (pieces.empty() ? "." : ").");
+    s << " On the light's core or starburst: " << light_ghosts << ".";
   }
   // Against the model's ceiling: the median loss, and the frames that lost most, up to three.
   if (ceiling_frames > 0) {
@@ -655,7 +754,7 @@ cv::Mat quadraticPedestal(const cv::Mat& rest, const cv::Mat& region) {
 }
 
 CeilingFrame ceilingOfFrame(const Frame& f, const CeilingOptions& options) {
-  const FrameTruth truth = readFrameTruth(f, luminance(f.image));
+  const FrameTruth truth = readFrameTruth(f, luminance(f.image), kNoiseBlockPx);
   CeilingFrame cf;
   cf.angle_deg = f.angle_deg;
   cf.noise_sigma = truth.noise_sigma;

@@ -24,12 +24,22 @@
 //    11.4 px. It is left out of the matching, recall, precision and centroid errors, and counted
 //    apart (glare_ghosts). Recall and precision quoted in comments from before this rule (commit
 //    05c548b) count a glare as a detection: compare them with one another, not with later ones.
+//  - Per matched visible pair: the centroid error in px and in % of the true ghost's radius; the
+//    flux error |Σ model − Σ truth| / Σ truth of the ghost's luminance over the image (the model
+//    ghost rendered alone against the true ghost's layer); the PSNR of the model's whole image
+//    against the noise-free flare over that true ghost's own support (its layer > σ).
+//  - Continuity of each true ghost: of the frames it is visible in, the largest share matched by
+//    one and the same model ghost id (1: one track drew it throughout; 0: never found).
+//  - Light ghosts: unmatched model ghosts (not a glare) on the light's own image, the truth's main
+//    layer minus its ghost layers, where it exceeds light_factor × σ (the core and the
+//    starburst's rays): their centroid inside that region, or most of their light on it.
 //  - Without truth: PSNR of the model against the frame over the pixels where the model exceeds
 //    the noise σ.
-// The noise floor σ is 1.4826 × the median absolute deviation of frame − noise-free radiance over
-// valid pixels (truth known: the background's noise, not the light's shot noise), else the pixel
-// noise from neighbour differences (fit/cost.h estimatePixelNoiseSigma: frame-filling veils do
-// not inflate it).
+// The noise floor σ (truth known) is measured on frame − noise-free luminance at a scale above a
+// demosaic's correlation (noiseFloor): a mono and a demosaiced RGGB capture of one lens and noise
+// model get the same σ and the same visible ghosts. Without truth it is the pixel noise from
+// neighbour differences (fit/cost.h estimatePixelNoiseSigma: frame-filling veils do not inflate
+// it).
 
 #include <functional>
 #include <limits>
@@ -47,11 +57,22 @@
 
 namespace flarekit::fit {
 
+// The noise floor of a frame from its noise image (frame − noise-free luminance) over the valid
+// pixels: 1.4826 × the median absolute deviation of the noise's means over block_px × block_px
+// blocks (wholly valid ones), times block_px; per pixel at block_px 1. The MAD, not the RMS, is the
+// typical (background) pixel's, not the light core's shot noise. 0 when no block is valid.
+// 4 px: past a bilinear demosaic's 3×3 reach, so its smoothing no longer hides the photosites'
+// noise (RGGB luminance: 0.53 × the photosites' σ per pixel, 0.97 × at 4 px, 1.1 × at 16).
+inline constexpr int kNoiseBlockPx = 4;
+double noiseFloor(const cv::Mat& noise, const cv::Mat& valid, int block_px = kNoiseBlockPx);
+
 struct EvaluationOptions {
   bool odd_frames_only = false;   // evaluate frames 1, 3, 5, … (the ones --holdout odd left out)
   double visible_factor = 10;     // a true ghost counts when its peak > this × noise σ (> 0)
   double match_fraction = 0.25;   // gate as a fraction of the true ghost's radius (> 0)
   double min_match_px = 3;        // smallest gate, pixels (> 0)
+  double light_factor = 10;       // the light's region: its own image > this × noise σ (> 0)
+  int noise_block_px = kNoiseBlockPx;  // the noise floor's block width, pixels (≥ 1; noiseFloor)
 
   bool IsValid(std::string* error) const;
 };
@@ -59,6 +80,7 @@ struct EvaluationOptions {
 struct FrameEvaluation {
   double angle_deg = 0;
   double noise_sigma = 0;
+  double pixel_noise_sigma = 0;    // truth known: noiseFloor per pixel (block 1), for comparison
   double psnr_db = 0;              // vs truth (NaN without truth)
   double capture_psnr_db = 0;      // vs the frame (NaN when the model is empty here)
   int true_ghosts_visible = 0;
@@ -67,14 +89,23 @@ struct FrameEvaluation {
   int model_ghosts_matched = 0;    // matched to some true ghost
   int glare_ghosts = 0;            // glare, drawn but not matched (not in model_ghosts; see above)
   int model_ghosts_pieces = 0;     // unmatched model ghosts that are pieces of a true ghost
-  // Each matched visible true ghost: its model ghost and how far their centroids are apart.
+  int light_ghosts = 0;            // unmatched model ghosts on the light (Unmatched::onLight)
+  // Each matched visible true ghost: its model ghost, how far their centroids are apart, how
+  // their light compares, and how well the model draws the flare where that ghost is.
   struct Matched {
     int true_id = 0, model_id = 0;
     double radius_px = 0;             // the true ghost's, as the gate uses it
     double centroid_error_px = 0;
+    double centroid_error_pct = 0;    // 100 × centroid_error_px / radius_px
+    double flux_error = 0;            // |model − true flux| / true flux (fraction; Σ luminance)
+    double psnr_db = 0;               // the model's image vs the noise-free flare over the true
+                                      // ghost's support (its layer > σ); NaN when it has none
   };
   std::vector<Matched> matched;
-  double medianCentroidErrorPx() const;  // over `matched` (NaN when none)
+  double medianCentroidErrorPx() const;   // over `matched` (NaN when none)
+  double medianCentroidErrorPct() const;  // over `matched` (NaN when none)
+  double medianFluxError() const;         // over `matched` (NaN when none)
+  double medianGhostPsnrDb() const;       // over `matched` (NaN when none)
   std::vector<int> missed_true_ids;        // visible true ghosts without a match
   // Each missed visible true ghost: where it is, and the nearest model ghost (why it is missed:
   // none near it, or one beyond the gate).
@@ -94,12 +125,19 @@ struct FrameEvaluation {
   // gate (a caustic's bright core apart from its faint body, Brendel Tessar ghost 15 at 3–9°).
   // With less, it draws light no one true ghost holds (the light's own image, noise, or where
   // several ghosts overlap). Precision counts both as unmatched; this says which loss is which.
+  // On the light when its centroid lies in the light's region (EvaluationOptions::light_factor)
+  // or more than kLightFraction of its light does: a ghost drawn on the core or a starburst ray.
+  // The two are told apart independently: a piece of a ghost that lies on the light is both.
   struct Unmatched {
     static constexpr double kPieceFraction = 0.5;
+    static constexpr double kLightFraction = 0.5;
     int model_id = 0;
     int true_id = -1;                 // the true ghost holding most of its light (−1: none)
     double fraction_in_true = 0;      // that part, 0–1
+    double fraction_on_light = 0;     // the part of its light on the light's region, 0–1
+    bool centroid_on_light = false;   // its centroid's pixel is in that region
     bool piece() const { return fraction_in_true >= kPieceFraction; }
+    bool onLight() const { return centroid_on_light || fraction_on_light > kLightFraction; }
   };
   std::vector<Unmatched> unmatched;
   // The model's ceiling in this frame (`flarekit fit-ceiling`, Evaluation::setCeiling); NaN where
@@ -124,6 +162,10 @@ struct TrueGhostSummary {
   double missed_median_peak_sigma = 0;            // its median peak there, noise σ (NaN when never missed)
   double median_radius_px = 0;                    // over the frames it was visible in
   int unmatched_pieces = 0;  // unmatched model ghosts, over the frames, that are pieces of it
+  // Of the frames it is visible in, the largest share matched by one model ghost id (0–1), and
+  // that id (−1 when never found).
+  double continuity = 0;
+  int continuity_model_id = -1;
 };
 
 struct Evaluation {
@@ -133,9 +175,14 @@ struct Evaluation {
   double median_psnr_db = 0;
   double median_capture_psnr_db = 0;
   double median_centroid_error_px = 0;
+  double median_centroid_error_pct = 0;  // in % of the true ghost's radius, over matched pairs
+  double median_flux_error = 0;          // fraction, over matched pairs
+  double median_ghost_psnr_db = 0;       // PSNR over each true ghost's support, over matched pairs
+  double continuity = 0;                 // mean over true_ghosts of their continuity (NaN: none)
   double recall = 0, precision = 0;
   int true_ghosts_visible = 0, true_ghosts_found = 0, model_ghosts = 0, model_ghosts_matched = 0;
   int model_ghosts_pieces = 0;  // of the unmatched, pieces of a true ghost (FrameEvaluation::Unmatched)
+  int light_ghosts = 0;         // of the unmatched, on the light's core or rays, over the frames
   int glare_ghosts = 0;  // summed over the frames
   // Against the model's ceiling (setCeiling): the frames it was measured in, and the median of
   // ceiling − PSNR over them (what detection, tracking and the optimizer lost; NaN when none).

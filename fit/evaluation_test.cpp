@@ -1,6 +1,8 @@
 // Tests of fit-eval's measures on hand-made frames whose truth is known: the match gate follows a
-// ghost's size, not a caustic's spike on it, and the noise floor is the background's noise, not
-// the shot noise of the light's core.
+// ghost's size, not a caustic's spike on it; the noise floor is the background's noise, not the
+// shot noise of the light's core, and a demosaic's smoothing does not lower it; the per-pair
+// figures (centroid error in % of the radius, flux error, PSNR over the ghost's support), track
+// continuity and the model ghosts drawn on the light.
 #include "fit/evaluation.h"
 
 #include <gtest/gtest.h>
@@ -8,6 +10,7 @@
 
 #include "common/error.h"
 #include "common/exr.h"
+#include "common/image.h"
 #include "common/testing.h"
 #include "fit/testing.h"
 #include "model/model_renderer.h"
@@ -18,6 +21,12 @@ namespace fs = std::filesystem;
 using flarekit::testing::TempDir;
 
 const cv::Size kSize(200, 130);
+
+cv::Mat whiteNoise(cv::Size size, double sigma, uint64_t seed) {
+  cv::Mat noise(size, CV_32F);
+  cv::RNG(seed).fill(noise, cv::RNG::NORMAL, 0, sigma);
+  return noise;
+}
 
 model::GhostParameters disc(double x, double y, double radius, double value) {
   model::GhostParameters g;
@@ -209,6 +218,194 @@ TEST(EvaluateModel, NoiseFloorIsTheBackgroundsNotTheLightsShotNoise) {
   EXPECT_NEAR(ev.frames[0].noise_sigma, 1e-4, 0.2e-4);
   EXPECT_EQ(ev.true_ghosts_visible, 1);
   EXPECT_EQ(ev.true_ghosts_found, 1);
+}
+
+// The luminance (Rec. 709) of an RGGB mosaic of `photosites` demosaiced bilinearly, as the
+// simulated camera does (acquisition/hdr_merge.h demosaicBilinear): each colour the mean of its
+// sites in the 3×3 neighbourhood, a site's own value where it has that colour.
+cv::Mat bayerLuminance(const cv::Mat& photosites) {
+  auto colour = [](int y, int x) { return y % 2 == 0 ? (x % 2 == 0 ? 0 : 1) : (x % 2 == 0 ? 1 : 2); };
+  cv::Mat rgb(photosites.size(), CV_32FC3);
+  for (int y = 0; y < photosites.rows; ++y)
+    for (int x = 0; x < photosites.cols; ++x) {
+      double sum[3] = {0, 0, 0};
+      int count[3] = {0, 0, 0};
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int yy = y + dy, xx = x + dx;
+          if (yy < 0 || yy >= photosites.rows || xx < 0 || xx >= photosites.cols) continue;
+          const int c = colour(yy, xx);
+          if (c == colour(y, x) && (dx != 0 || dy != 0)) continue;
+          sum[c] += photosites.at<float>(yy, xx);
+          ++count[c];
+        }
+      for (int c = 0; c < 3; ++c) rgb.at<cv::Vec3f>(y, x)[c] = static_cast<float>(sum[c] / count[c]);
+    }
+  return luminance(rgb);
+}
+
+// The noise floor of white noise is its σ, per pixel or over blocks. The same photosites' noise
+// demosaiced from an RGGB mosaic has half that spread per pixel; over blocks its floor is within
+// 10 % of the white noise's.
+TEST(NoiseFloor, ADemosaicsSmoothingDoesNotLowerIt) {
+  const cv::Size size(320, 240);
+  const cv::Mat white = whiteNoise(size, 1e-4, 11);
+  const cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  EXPECT_NEAR(noiseFloor(white, valid, 1), 1e-4, 3e-6);
+  EXPECT_NEAR(noiseFloor(white, valid), 1e-4, 5e-6);
+  const cv::Mat bayer = bayerLuminance(white);
+  EXPECT_LT(noiseFloor(bayer, valid, 1), 0.6 * noiseFloor(white, valid, 1));
+  EXPECT_NEAR(noiseFloor(bayer, valid) / noiseFloor(white, valid), 1, 0.1);
+  // Invalid pixels leave their blocks out; with none valid there is no floor.
+  cv::Mat half = valid.clone();
+  half(cv::Rect(0, 0, size.width / 2, size.height)) = 0;
+  EXPECT_NEAR(noiseFloor(white, half), 1e-4, 7e-6);
+  EXPECT_EQ(noiseFloor(white, cv::Mat::zeros(size, CV_8U)), 0);
+}
+
+// A ghost at 14 σ of the photosites' noise is visible on a mono frame and on an RGGB frame of the
+// same noise, demosaiced; one at 7 σ on neither (per pixel, the demosaiced noise is half as wide,
+// and the 7 σ ghost would clear 10 × that).
+TEST(EvaluateModel, VisibilityDoesNotDependOnTheSensorsLayout) {
+  TempDir dir;
+  const model::GhostParameters g = disc(100, 65, 20, 1.4e-3);
+  const cv::Mat white = whiteNoise(kSize, 1e-4, 5);
+  const cv::Mat demosaiced = bayerLuminance(white);
+  for (const cv::Mat& noise : {white, demosaiced}) {
+    const cv::Mat ghost = render(g);
+    const auto ev = evaluateModel(modelOf(g), stackOf(dir, ghost + noise, ghost, ghost));
+    ASSERT_EQ(ev.frames.size(), 1u);
+    EXPECT_NEAR(ev.frames[0].noise_sigma, 1e-4, 1e-5);
+    EXPECT_EQ(ev.true_ghosts_visible, 1);
+    const cv::Mat faint = render(disc(100, 65, 20, 0.7e-3));
+    EXPECT_EQ(evaluateModel(modelOf(g), stackOf(dir, faint + noise, faint, faint)).true_ghosts_visible, 0);
+  }
+  EXPECT_LT(noiseFloor(demosaiced, cv::Mat(kSize, CV_8U, cv::Scalar(255)), 1), 0.6e-4);
+}
+
+// Two true discs, each matched: ghost 0 drawn exactly, ghost 1 3 px to the right and 1.2× as
+// bright. Ghost 1's centroid error is 3 px, 15 % of its 20 px radius; its flux error 20 %; its
+// PSNR over its own support that of a 20 % error there, whatever ghost 0's exact pixels.
+TEST(EvaluateModel, PerGhostCentroidErrorInRadiiFluxErrorAndPsnrOverItsSupport) {
+  TempDir dir;
+  const model::GhostParameters t0 = disc(50, 65, 20, 1e-3), t1 = disc(150, 65, 20, 1e-3);
+  const cv::Mat g0 = render(t0), g1 = render(t1);
+  const cv::Mat noise = whiteNoise(kSize, 1e-5, 3);
+  const FrameStack stack = stackOf(dir, g0 + g1 + noise, g0 + g1, std::vector<cv::Mat>{g0, g1});
+  FrameFits fits;
+  fits.image_size = kSize;
+  const model::GhostParameters m1 = disc(153, 65, 20, 1.2e-3);
+  fits.frames.push_back({0.5, {{0, t0}, {1, m1}}, {}});
+  const auto ev = evaluateFrameFits(fits, stack);
+  ASSERT_EQ(ev.frames.size(), 1u);
+  const auto& matched = ev.frames[0].matched;
+  ASSERT_EQ(matched.size(), 2u);
+  EXPECT_NEAR(matched[0].centroid_error_pct, 0, 1e-6);
+  EXPECT_NEAR(matched[0].flux_error, 0, 1e-6);
+  EXPECT_GT(matched[0].psnr_db, 100);
+  EXPECT_NEAR(matched[1].centroid_error_px, 3, 0.05);
+  EXPECT_DOUBLE_EQ(matched[1].centroid_error_pct, 100 * matched[1].centroid_error_px / matched[1].radius_px);
+  EXPECT_NEAR(matched[1].centroid_error_pct, 15, 1);
+  EXPECT_NEAR(matched[1].flux_error, 0.2, 1e-3);
+  // Over ghost 1's support (its layer > σ): the peak there and the model's whole image.
+  const cv::Mat support = g1 > ev.frames[0].noise_sigma;
+  const cv::Mat model_image = render(t0) + render(m1);
+  double peak = 0;
+  cv::minMaxLoc(g0 + g1, nullptr, &peak, nullptr, nullptr, support);
+  cv::Mat d = model_image - (g0 + g1);
+  const double mse = cv::mean(d.mul(d), support)[0];
+  EXPECT_NEAR(matched[1].psnr_db, 10 * std::log10(peak * peak / mse), 0.01);
+  EXPECT_LT(matched[1].psnr_db, 20);
+  // Medians over the two pairs.
+  EXPECT_NEAR(ev.median_centroid_error_pct, matched[1].centroid_error_pct / 2, 1e-9);
+  EXPECT_NEAR(ev.median_flux_error, 0.1, 1e-3);
+  EXPECT_NEAR(ev.median_ghost_psnr_db, (matched[0].psnr_db + matched[1].psnr_db) / 2, 1e-9);
+  const nlohmann::json j = ev.toJson();
+  EXPECT_DOUBLE_EQ(j["median_flux_error"].get<double>(), ev.median_flux_error);
+  EXPECT_DOUBLE_EQ(j["median_centroid_error_pct"].get<double>(), ev.median_centroid_error_pct);
+  EXPECT_DOUBLE_EQ(j["median_ghost_psnr_db"].get<double>(), ev.median_ghost_psnr_db);
+  EXPECT_DOUBLE_EQ(j["frames"][0]["matched"][1]["flux_error"].get<double>(), matched[1].flux_error);
+  const std::string brief = ev.BriefReport();
+  EXPECT_NE(brief.find("% of the ghost's radius), median flux error 10 %"), std::string::npos) << brief;
+}
+
+// Over four frames: true ghost 0 matched by model ghost 4 twice, by 7 once and missed once
+// (continuity 2/4); true ghost 1 matched by model ghost 5 throughout (1).
+TEST(EvaluateFrameFits, ContinuityIsTheLargestShareOfATrueGhostsFramesMatchedByOneModelGhost) {
+  TempDir dir;
+  const model::GhostParameters t0 = disc(50, 65, 20, 1e-3), t1 = disc(150, 65, 20, 1e-3);
+  const cv::Mat g0 = render(t0), g1 = render(t1);
+  FrameStack stack = stackOf(dir, g0 + g1 + whiteNoise(kSize, 1e-5, 9), g0 + g1, std::vector<cv::Mat>{g0, g1});
+  addFramesAt(stack, {0.7, 0.9, 1.1});
+  model::GhostParameters off = t0;
+  off.center_x = 90;  // 40 px away: missed
+  FrameFits fits;
+  fits.image_size = kSize;
+  fits.frames = {{0.5, {{4, t0}, {5, t1}}, {}},
+                 {0.7, {{7, t0}, {5, t1}}, {}},
+                 {0.9, {{4, t0}, {5, t1}}, {}},
+                 {1.1, {{4, off}, {5, t1}}, {}}};
+  const auto ev = evaluateFrameFits(fits, stack);
+  ASSERT_EQ(ev.true_ghosts.size(), 2u);
+  EXPECT_EQ(ev.true_ghosts[0].frames_visible, 4);
+  EXPECT_EQ(ev.true_ghosts[0].frames_found, 3);
+  EXPECT_DOUBLE_EQ(ev.true_ghosts[0].continuity, 0.5);
+  EXPECT_EQ(ev.true_ghosts[0].continuity_model_id, 4);
+  EXPECT_DOUBLE_EQ(ev.true_ghosts[1].continuity, 1);
+  EXPECT_EQ(ev.true_ghosts[1].continuity_model_id, 5);
+  EXPECT_DOUBLE_EQ(ev.continuity, 0.75);
+  const nlohmann::json j = ev.toJson();
+  EXPECT_DOUBLE_EQ(j["continuity"].get<double>(), 0.75);
+  EXPECT_DOUBLE_EQ(j["true_ghosts"][0]["continuity"].get<double>(), 0.5);
+  EXPECT_NE(ev.BriefReport().find("continuity 0.75"), std::string::npos) << ev.BriefReport();
+}
+
+// The light's image is the truth's main layer less its ghost layers: here a core and two rays
+// (vertical stripes) with a gap between them. Model ghosts matched to no true ghost: one on the
+// core (its centroid there), one centred in the gap between the rays (its centroid off the light,
+// most of its light on it) count; one in the dark and one drawing a piece of the true ghost (on
+// the main layer, not on the light) do not.
+TEST(EvaluateModel, CountsModelGhostsOnTheLightsCoreOrStarburst) {
+  TempDir dir;
+  const cv::Mat ghost = render(disc(150, 65, 25, 1e-3));
+  cv::Mat light = render(disc(30, 65, 6, 0.5));
+  light(cv::Rect(88, 10, 10, 110)) += 0.01;   // rays at x 88–97 and 100–109
+  light(cv::Rect(100, 10, 10, 110)) += 0.01;
+  const cv::Mat radiance = ghost + light;
+  const cv::Mat frame = radiance + whiteNoise(kSize, 1e-5, 13);
+  model::FlareModel m = modelOf(disc(150, 65, 25, 1e-3));
+  auto add = [&](int id, const model::GhostParameters& g) {
+    model::GhostTrack t = m.ghosts[0];
+    t.id = id;
+    t.parameters.clear();
+    for (double v : model::toParameterVector(g)) t.parameters.push_back({{v}});
+    m.ghosts.push_back(t);
+  };
+  add(1, disc(30, 65, 4, 1e-2));   // on the core
+  add(2, disc(99, 65, 6, 1e-3));   // centred in the gap, its sides on the rays
+  add(3, disc(60, 20, 5, 1e-3));   // in the dark
+  add(4, disc(168, 65, 5, 1e-3));  // on the true ghost, beyond its gate
+  const auto ev = evaluateModel(m, stackOf(dir, frame, radiance, ghost));
+  ASSERT_EQ(ev.frames.size(), 1u);
+  const auto& f = ev.frames[0];
+  EXPECT_EQ(f.model_ghosts_matched, 1);
+  ASSERT_EQ(f.unmatched.size(), 4u);
+  EXPECT_TRUE(f.unmatched[0].centroid_on_light);
+  EXPECT_TRUE(f.unmatched[0].onLight());
+  EXPECT_FALSE(f.unmatched[1].centroid_on_light);
+  EXPECT_GT(f.unmatched[1].fraction_on_light, 0.5);
+  EXPECT_TRUE(f.unmatched[1].onLight());
+  EXPECT_EQ(f.unmatched[2].fraction_on_light, 0);
+  EXPECT_FALSE(f.unmatched[2].onLight());
+  EXPECT_TRUE(f.unmatched[3].piece());
+  EXPECT_FALSE(f.unmatched[3].onLight());
+  EXPECT_EQ(f.light_ghosts, 2);
+  EXPECT_EQ(ev.light_ghosts, 2);
+  const nlohmann::json j = ev.toJson();
+  EXPECT_EQ(j["light_ghosts"], 2);
+  EXPECT_EQ(j["frames"][0]["light_ghosts"], 2);
+  EXPECT_EQ(j["frames"][0]["unmatched"][1]["on_light"], true);
+  EXPECT_NE(ev.BriefReport().find("On the light's core or starburst: 2."), std::string::npos) << ev.BriefReport();
 }
 
 TEST(EvaluateFrameFits, MeasuresTheFittedFramesAndLeavesTheOthersOut) {
@@ -440,6 +637,17 @@ TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
               std::string::npos)
         << e.what();
   }
+}
+
+TEST(EvaluationOptions, DefaultsAreValid) {
+  std::string error;
+  EXPECT_TRUE(EvaluationOptions{}.IsValid(&error)) << error;
+  EvaluationOptions bad;
+  bad.noise_block_px = 0;
+  EXPECT_FALSE(bad.IsValid(&error));
+  bad = {};
+  bad.light_factor = 0;
+  EXPECT_FALSE(bad.IsValid(&error));
 }
 
 TEST(FrameFits, SavesAndLoadsEveryParameterExactly) {

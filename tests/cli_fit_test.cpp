@@ -140,6 +140,13 @@ TEST(CliFit, FitsAndEvaluatesASmallCapture) {
   EXPECT_GE(j["precision"].get<double>(), 0.95);
   EXPECT_GE(j["median_psnr_db"].get<double>(), 32);
   EXPECT_LE(j["median_centroid_error_px"].get<double>(), 0.5);
+  // The per-ghost figures: a fit of this small capture draws each ghost's light and keeps one
+  // track per ghost.
+  EXPECT_LE(j["median_centroid_error_pct"].get<double>(), 10) << eval.out;
+  EXPECT_LE(j["median_flux_error"].get<double>(), 0.2);
+  EXPECT_GE(j["median_ghost_psnr_db"].get<double>(), 20);
+  EXPECT_GE(j["continuity"].get<double>(), 0.95);
+  EXPECT_EQ(j["light_ghosts"].get<int>(), 0);
   // The frames' own fits, which the report keeps, measure as the model does on every frame.
   auto frames = runFlarekit({"-q", "fit-eval", (dir / "report" / "frame_fits.json").string(),
                              (dir / "capture").string(), "--json"});
