@@ -260,7 +260,8 @@ const FrameData& chooseLevel(const FramePyramid& pyramid,
 
 GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
                      std::span<const model::GhostParameters> others,
-                     std::span<const model::GhostParameters> seeds, const CostOptions& options)
+                     std::span<const model::GhostParameters> seeds, const CostOptions& options,
+                     std::span<const std::array<double, 6>> prior_sigmas)
     : frame_(chooseLevel(pyramid, seeds, options)), edge_(edge), options_(options) {
   if (seeds.empty()) throw std::invalid_argument("GroupCost needs at least one ghost");
   const FrameData& frame = frame_;
@@ -318,7 +319,14 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
   // 15 dB, per λ: 1, 14, 1, 10, 7 → 8, 2, 8, 0, 5: they moved, they did not go.
   intensity_limit_ = 20 * std::max({data_peak, 3 * frame.noise_sigma, 1e-12});
 
-  if (options.prior_fraction > 0)
+  if (!prior_sigmas.empty())
+    for (size_t i = 0; i < seeds.size(); ++i) {
+      const auto& g = seeds[i];
+      prior_center_.push_back({g.center_x - g.left, g.center_x + g.right, g.center_y, g.height,
+                               g.curvature_left, g.curvature_right});
+      prior_sigma_.emplace_back(prior_sigmas[i].begin(), prior_sigmas[i].end());
+    }
+  else if (options.prior_fraction > 0)
     for (const auto& g : seeds) {
       const double length = options.prior_fraction * std::max({g.left, g.right, g.height}) + 1;
       prior_center_.push_back({g.center_x - g.left, g.center_x + g.right, g.center_y, g.height,

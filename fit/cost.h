@@ -54,6 +54,7 @@
 // is analytic (model/'s renderer, envelope theorem at the fixed nearest point); E is linear, so
 // the Jacobian of r_edge is E applied to those images.
 
+#include <array>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -189,9 +190,12 @@ class GroupCost {
  public:
   // `others`: the ghosts modelled outside this group (fixed), subtracted from X. `seeds` fix the
   // region, its level and the number of ghosts.
+  // `prior_sigmas`, when given (one per seed), replace the shape prior's σ of each ghost: for its
+  // left point, right point, axis, h, Cl and Cr, in that order.
   GroupCost(const FramePyramid& frame, const EdgeFilter& edge,
             std::span<const model::GhostParameters> others,
-            std::span<const model::GhostParameters> seeds, const CostOptions& options);
+            std::span<const model::GhostParameters> seeds, const CostOptions& options,
+            std::span<const std::array<double, 6>> prior_sigmas = {});
 
   int ghostCount() const { return ghost_count_; }
   int parametersPerGhost() const { return parameters_per_ghost_; }
@@ -297,7 +301,7 @@ class GroupCost {
 
 // A ghost's outline is sharp: its outside fall-off Fo is at most this fraction of the image's
 // diagonal. Veiling glare is the exception (isGlare).
-inline constexpr double kSharpOutsideFalloffFraction = 0.1;
+inline constexpr double kSharpOutsideFalloffFraction = 0.03;
 
 // Veiling glare: a ghost whose outside fall-off is longer than twice a sharp outline's. The
 // frame's glow of many veils, each too faint to see, sums to a pedestal under the ghosts; with

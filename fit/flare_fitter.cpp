@@ -16,7 +16,7 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 }  // namespace
 
 bool FlareFitterOptions::IsValid(std::string* error) const {
-  if (!horizon.IsValid(error) || !sweep.IsValid(error) || !candidates.IsValid(error) ||
+  if (!horizon.IsValid(error) || !light_pattern.IsValid(error) || !sweep.IsValid(error) || !candidates.IsValid(error) ||
       !optical_zero.IsValid(error) || !frame_fit.IsValid(error) || !model_fit.IsValid(error))
     return false;
   auto fail = [&](const char* m) {
@@ -109,6 +109,7 @@ FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
 
   auto t = Clock::now();
   result.horizon = measureHorizon(stack, options.horizon);
+  result.light = measureLightPattern(stack, result.horizon, options.light_pattern);
   sum.horizon_y_px = result.horizon.y_px;
   sum.light_frames = result.horizon.lights_found;
   sum.seconds_horizon = since(t);
@@ -144,13 +145,14 @@ FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
       result.frame_fits.push_back(std::move(f));
     }
   } else {
-    result.frame_fits = fitFrames(stack, frames, result.candidates, options.frame_fit, &sum.frame_fit);
+    result.frame_fits = fitFrames(stack, frames, result.horizon, result.light, result.candidates,
+                                  options.frame_fit, &sum.frame_fit);
   }
   sum.seconds_frame_fit = since(t);
 
   t = Clock::now();
-  result.model = fitModel(stack, result.candidates, result.frame_fits, sum.optical_zero, result.horizon.y_px,
-                          options.model_fit, &sum.model_fit);
+  result.model = fitModel(stack, result.horizon, result.light, result.candidates, result.frame_fits,
+                          sum.optical_zero, options.model_fit, &sum.model_fit);
   sum.ghosts = static_cast<int>(result.model.ghosts.size());
   sum.seconds_model_fit = since(t);
   // Frame indices of the stack the caller gave.

@@ -4,7 +4,7 @@
 // all frames. The stages, each in its own file with its own options, run in order:
 //
 //   1. frames            fit/frames.h            the capture or EXR stack (loaded by the caller)
-//   2. horizon           fit/horizon.h           symmetry row, the light in every frame
+//   2. horizon           fit/horizon.h           symmetry row, the light in every frame, its pattern
 //   3. sweep             fit/sweep.h             the sweep image S(θ, x) and its border traces
 //   4. ghost candidates  fit/ghost_candidates.h  traces paired into ghosts, seeds at every frame;
 //                                                then the optical zero from their centres
@@ -30,6 +30,7 @@ namespace flarekit::fit {
 
 struct FlareFitterOptions {
   HorizonOptions horizon;
+  LightPatternOptions light_pattern;
   SweepOptions sweep;
   CandidateOptions candidates;
   OpticalZeroOptions optical_zero;
@@ -70,6 +71,7 @@ struct FitSummary {
 struct FitResult {
   model::FlareModel model;
   Horizon horizon;
+  LightPattern light;
   SweepImage sweep;
   std::vector<BorderTrace> traces;
   std::vector<GhostCandidate> candidates;

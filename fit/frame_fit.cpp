@@ -9,18 +9,20 @@
 #include <tbb/parallel_for.h>
 
 #include "common/progress.h"
+#include "fit/shade.h"
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {
 
 bool FrameFitOptions::IsValid(std::string* error) const {
-  if (!cost.IsValid(error) || !solver.IsValid(error) || !pedestal_fit.IsValid(error)) return false;
+  if (!cost.IsValid(error) || !solver.IsValid(error) || !shade.IsValid(error)) return false;
   auto fail = [&](const char* m) {
     if (error) *error = m;
     return false;
   };
   if (sweeps < 1) return fail("frame fit: sweeps must be ≥ 1");
-  if (pedestal_level < 1) return fail("frame fit: pedestal_level must be ≥ 1");
+  if (!(seen_border_sigma_px > 0) || !(unseen_sigma_fraction > 0))
+    return fail("frame fit: seen_border_sigma_px and unseen_sigma_fraction must be > 0");
   return true;
 }
 
@@ -37,27 +39,14 @@ model::GhostParameters canonicalShade(const model::GhostParameters& g) {
 
 namespace {
 
-// The ghosts' image over the whole frame at level k (capture pixels → k×k blocks).
-cv::Mat renderAtLevel(const std::vector<model::GhostParameters>& ghosts, cv::Size capture, int k,
-                      int channels) {
-  model::ViewTransform view;
-  view.scale = 1.0 / k;
-  return model::renderGhosts(ghosts, cv::Size(capture.width / k, capture.height / k), channels, {}, view);
-}
 
-// Averages of k×k blocks (sizes round down), and the blocks all of whose pixels are valid.
-void downsample(const cv::Mat& image, const cv::Mat& valid, int k, cv::Mat* out, cv::Mat* out_valid) {
-  const cv::Size size(image.cols / k, image.rows / k);
-  const cv::Rect whole(0, 0, size.width * k, size.height * k);
-  cv::resize(image(whole), *out, size, 0, 0, cv::INTER_AREA);
-  cv::Mat v;
-  cv::resize(valid(whole), v, size, 0, 0, cv::INTER_AREA);
-  *out_valid = v >= 255;
-}
-
-FrameFit fitOneFrame(const FrameStack& stack, int index, const std::vector<GhostCandidate>& candidates,
-                     const FrameFitOptions& o, const EdgeFilter& edge) {
-  const Frame& frame = stack.frames[index];
+FrameFit fitOneFrame(const FrameStack& stack, int index, const LightImage& light, const LightPattern& pattern,
+                     const std::vector<GhostCandidate>& candidates, const FrameFitOptions& o,
+                     const EdgeFilter& edge) {
+  Frame frame = stack.frames[index];
+  frame.image = frame.image.clone();
+  frame.valid = frame.valid.clone();
+  pattern.takeOut(light, frame.image, frame.valid);
   FrameFit fit;
   fit.frame = index;
   fit.angle_deg = frame.angle_deg;
@@ -67,6 +56,7 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const std::vector<Ghost
       fit.ghost_ids.push_back(c.id);
       fit.ghosts.push_back(c.seed(index));
     }
+  const std::vector<model::GhostParameters> seeds = fit.ghosts;
   // Largest first: the small ones then fit on what the large ones leave.
   std::vector<size_t> order(fit.ghosts.size());
   std::iota(order.begin(), order.end(), 0);
@@ -75,39 +65,35 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const std::vector<Ghost
     return (g.left + g.right) * g.height;
   };
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return area(a) > area(b); });
-  cv::Mat target = frame.image;
+  // The shades of all ghosts and the pedestal together, then each ghost's outline in turn with
+  // the others and the pedestal held, then the shades together again.
+  model::Pedestal* pedestal = o.pedestal ? &fit.pedestal : nullptr;
+  fitShades(frame.image, frame.valid, fit.noise_sigma, fit.ghosts, pedestal, o.shade);
   for (int sweep = 0; sweep < o.sweeps; ++sweep) {
+    const cv::Mat target = frame.image - fit.pedestal.image(stack.size);
     FramePyramid pyramid(target, frame.valid, edge, fit.noise_sigma);
     fit.cost = 0;
     for (size_t i : order) {
       std::vector<model::GhostParameters> others;
       for (size_t j = 0; j < fit.ghosts.size(); ++j)
         if (j != i) others.push_back(fit.ghosts[j]);
-      GroupCost cost(pyramid, edge, others, std::span(&fit.ghosts[i], 1), o.cost);
+      // The borders the sweep saw in the frame are known to a pixel or two; the rest of the
+      // outline (beyond the frame, in the light) only roughly.
+      const model::GhostParameters& seed = seeds[i];
+      const double size = std::max({seed.left, seed.right, seed.height});
+      auto border = [&](double x) {
+        return x >= 0 && x <= stack.size.width ? o.seen_border_sigma_px : o.unseen_sigma_fraction * size;
+      };
+      const std::array<double, 6> sigmas = {border(seed.center_x - seed.left), border(seed.center_x + seed.right), 1.0,
+                                            o.unseen_sigma_fraction * seed.height, 0.3, 0.3};
+      GroupCost cost(pyramid, edge, others, std::span(&fit.ghosts[i], 1), o.cost, std::span(&sigmas, 1));
       const GroupFitResult r = solveGroup(cost, std::span(&fit.ghosts[i], 1), o.solver);
       fit.ghosts[i] = r.ghosts[0];
       fit.cost += r.final_cost;
       fit.evaluations += r.evaluations;
       fit.iterations += r.iterations;
     }
-    if (!o.pedestal) continue;
-    // The glow the ghosts leave, fitted on block averages (it is smooth), taken out of the frame
-    // for the next pass.
-    const int k = o.pedestal_level;
-    cv::Mat level, level_valid;
-    downsample(frame.image, frame.valid, k, &level, &level_valid);
-    const cv::Mat rest = level - renderAtLevel(fit.ghosts, stack.size, k, stack.channels);
-    fit.pedestal = fitPedestal(rest, level_valid, stack.size, k, fit.noise_sigma / k, o.pedestal_fit);
-    cv::Mat glow = cv::Mat::zeros(frame.image.size(), frame.image.type());
-    fit.pedestal.addTo(glow, stack.size);
-    // addTo clamps the sum at 0; the pedestal may be negative where it corrects the ghosts.
-    cv::Mat signed_glow = cv::Mat::zeros(frame.image.size(), frame.image.type());
-    for (int y = 0; y < glow.rows; ++y)
-      for (int x = 0; x < glow.cols; ++x)
-        for (int c = 0; c < stack.channels; ++c)
-          signed_glow.ptr<float>(y)[x * stack.channels + c] = static_cast<float>(
-              fit.pedestal.at({x + 0.5, y + 0.5}, stack.size, c));
-    target = frame.image - signed_glow;
+    fitShades(frame.image, frame.valid, fit.noise_sigma, fit.ghosts, pedestal, o.shade);
   }
   for (auto& g : fit.ghosts) g = canonicalShade(g);
   return fit;
@@ -116,6 +102,7 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const std::vector<Ghost
 }  // namespace
 
 std::vector<FrameFit> fitFrames(const FrameStack& stack, const std::vector<int>& frames,
+                                const Horizon& horizon, const LightPattern& pattern,
                                 const std::vector<GhostCandidate>& candidates,
                                 const FrameFitOptions& options, FrameFitSummary* summary) {
   std::string error;
@@ -127,7 +114,7 @@ std::vector<FrameFit> fitFrames(const FrameStack& stack, const std::vector<int>&
   std::vector<FrameFit> fits(frames.size());
   Progress progress("Fitting frames", static_cast<long long>(frames.size()));
   tbb::parallel_for(size_t{0}, frames.size(), [&](size_t i) {
-    fits[i] = fitOneFrame(stack, frames[i], candidates, o, edge);
+    fits[i] = fitOneFrame(stack, frames[i], horizon.lights[frames[i]], pattern, candidates, o, edge);
     progress.advance();
   });
   progress.finish();

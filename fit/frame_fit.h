@@ -3,11 +3,12 @@
 // ghost candidates at the frame's angle. A ghost is present where its traces say so: no
 // detection, no tracking, no decision to keep or drop.
 //
-// Per frame, the ghosts present are fitted in turn, largest first, each on its own region and
-// level (fit/cost.h) with all the others held where they stand (Gauss–Seidel), in `sweeps`
-// passes; the frame's pedestal (model/pedestal.h, the glow of veils with no border in the frame)
-// is fitted to what the ghosts leave after each pass and taken out of the frame for the next.
-// My is held on the horizon: every ghost is symmetric about it. Frames are independent and fitted
+// Per frame, the shades of all ghosts present and the frame's pedestal (model/pedestal.h, the glow
+// of veils with no border in the frame) are solved together (fit/shade.h); then each ghost is
+// fitted in turn, largest first, on its own region and level (fit/cost.h) with the others and the
+// pedestal held (Gauss–Seidel), and the shades solved together again, in `sweeps` passes.
+// My is held on the horizon: every ghost is symmetric about it. A shape prior holds each outline
+// near its seed: tightly where the sweep saw the border, loosely elsewhere. Frames are independent and fitted
 // in parallel; each one's result does not depend on the thread count.
 
 #include <string>
@@ -16,8 +17,9 @@
 #include "fit/cost.h"
 #include "fit/frames.h"
 #include "fit/ghost_candidates.h"
+#include "fit/horizon.h"
 #include "fit/group_solver.h"
-#include "fit/pedestal.h"
+#include "fit/shade.h"
 #include "model/ghost_shape.h"
 #include "model/pedestal.h"
 
@@ -28,8 +30,11 @@ struct FrameFitOptions {
   SolverOptions solver;              // Ceres Levenberg–Marquardt (or the paper's GD)
   int sweeps = 2;                    // passes over a frame's ghosts (≥ 1)
   bool pedestal = true;              // fit each frame's pedestal
-  PedestalFitOptions pedestal_fit;   // how
-  int pedestal_level = 2;            // the pedestal is fitted on k×k averages of the frame (≥ 1)
+  ShadeOptions shade;                // the shades and the pedestal by linear least squares
+  // The shape prior about each ghost's seed: σ of a border the sweep saw in the frame, pixels,
+  // and of the rest of the outline (a border beyond the frame, h), a fraction of its size.
+  double seen_border_sigma_px = 1.5;
+  double unseen_sigma_fraction = 0.3;
 
   bool IsValid(std::string* error) const;
 };
@@ -55,8 +60,10 @@ struct FrameFitSummary {
   double seconds = 0;
 };
 
-// Fits the frames `frames` (indices into the stack) with the candidates present in each.
+// Fits the frames `frames` (indices into the stack) with the candidates present in each, the
+// light's image (`pattern`, at each frame's light in `horizon`) taken out of them.
 std::vector<FrameFit> fitFrames(const FrameStack& stack, const std::vector<int>& frames,
+                                const Horizon& horizon, const LightPattern& pattern,
                                 const std::vector<GhostCandidate>& candidates,
                                 const FrameFitOptions& options, FrameFitSummary* summary = nullptr);
 

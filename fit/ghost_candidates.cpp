@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
+#include <optional>
 #include <numeric>
 
+#include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 
@@ -40,19 +43,31 @@ double meanOver(const SweepImage& s, int row, double x0, double x1) {
   return n ? sum / n : std::numeric_limits<double>::quiet_NaN();
 }
 
-// Whether S stays raised by `fraction` of the trace's step from the trace to the frame's edge on
-// the ghost's side, in most of the trace's frames: the ghost's other border lies beyond that edge.
-bool raisedToEdge(const SweepImage& s, const BorderTrace& t, double fraction) {
+// Where a lone border's ghost could end unseen, at the border's frame: the frame's edge or the
+// light's zone on the ghost's side, whichever comes first.
+double hiddenFrom(const SweepImage& s, int row, double x, BorderSide side) {
+  const bool left = side == BorderSide::kLeft;
+  if (std::isfinite(s.light_x_px[row])) {
+    const double near = left ? s.light_x_px[row] - s.light_zone_left_px : s.light_x_px[row] + s.light_zone_right_px;
+    if (left ? near > x : near < x) return near;
+  }
+  return left ? s.width() : 0.0;
+}
+
+// Whether S stays raised by `fraction` of the trace's step from the trace to where the ghost's
+// other border could lie unseen (hiddenFrom), in most of the trace's frames.
+bool raisedToHidden(const SweepImage& s, const BorderTrace& t, double fraction) {
   int raised = 0, tested = 0;
   for (const auto& p : t.points) {
     if (!(p.jump > 0)) continue;
     const bool left = t.side == BorderSide::kLeft;
     const double outside = left ? meanOver(s, p.row, p.x_px - 5, p.x_px - 2)
                                 : meanOver(s, p.row, p.x_px + 2, p.x_px + 5);
+    const double end = hiddenFrom(s, p.row, p.x_px, t.side);
     std::vector<double> inside;
-    const int a = left ? static_cast<int>(p.x_px) + 3 : 0;
-    const int b = left ? s.width() - 1 : static_cast<int>(p.x_px) - 3;
-    for (int x = a; x <= b; ++x)
+    const int a = left ? static_cast<int>(p.x_px) + 3 : static_cast<int>(end);
+    const int b = left ? static_cast<int>(end) - 1 : static_cast<int>(p.x_px) - 3;
+    for (int x = std::max(a, 0); x <= std::min(b, s.width() - 1); ++x)
       if (s.valid.at<uchar>(p.row, x)) inside.push_back(cleanAt(s, p.row, x) - outside);
     if (inside.size() < 4 || !std::isfinite(outside)) continue;
     ++tested;
@@ -90,27 +105,26 @@ std::vector<double> verticalProfile(const cv::Mat& lum, const cv::Mat& valid, do
   return profile;
 }
 
-// The distance from the horizon at which the profile falls most steeply (in log), within
-// [lo, hi], or NaN when it does not fall there.
-double fallingEdge(const std::vector<double>& profile, double lo, double hi) {
+// The distance from the horizon, within [lo, hi], at which the profile falls outwards by a step
+// closest to `step` (the ghost's border step on the horizon: one outline value Ib all round),
+// within a factor max_ratio; NaN when no step there is that close.
+double fallingEdge(const std::vector<double>& profile, double lo, double hi, double step, double max_ratio) {
   const int n = static_cast<int>(profile.size());
-  std::vector<double> l(n);
-  double floor = std::numeric_limits<double>::infinity();
-  for (double v : profile)
-    if (std::isfinite(v) && v > 0) floor = std::min(floor, v);
-  if (!std::isfinite(floor)) return std::numeric_limits<double>::quiet_NaN();
-  for (int k = 0; k < n; ++k) l[k] = std::log(std::max(std::isfinite(profile[k]) ? profile[k] : floor, floor));
-  double best = 0, at = std::numeric_limits<double>::quiet_NaN();
-  for (int k = std::max(1, static_cast<int>(lo)); k + 2 < n && k <= hi; ++k) {
-    // The step across k (three rows on each side), falling outwards.
-    const double inner = (l[k - 1] + l[std::max(0, k - 2)]) / 2;
-    const double outer = (l[k + 1] + l[k + 2]) / 2;
-    if (inner - outer > best) {
-      best = inner - outer;
-      at = k + 0.5;
+  auto at = [&](int k) { return std::isfinite(profile[k]) ? profile[k] : std::numeric_limits<double>::quiet_NaN(); };
+  std::vector<double> falls(n, 0.0);
+  for (int k = 2; k + 2 < n; ++k) {
+    const double f = 0.5 * (at(k - 2) + at(k - 1)) - 0.5 * (at(k + 1) + at(k + 2));
+    falls[k] = std::isfinite(f) ? f : 0.0;
+  }
+  double best = std::log(max_ratio), where = std::numeric_limits<double>::quiet_NaN();
+  for (int k = std::max(2, static_cast<int>(lo)); k + 2 < n && k <= hi; ++k) {
+    if (!(falls[k] > 0) || falls[k] < falls[k - 1] || falls[k] < falls[k + 1]) continue;
+    if (const double mismatch = std::abs(std::log(falls[k] / step)); mismatch < best) {
+      best = mismatch;
+      where = k + 0.5;
     }
   }
-  return at;
+  return where;
 }
 
 // Robust polynomial values of `v` over the rows (degree by length).
@@ -146,6 +160,74 @@ std::vector<double> borderAt(const BorderTrace& t, const SweepImage& s, int firs
   return out;
 }
 
+// The light's curve x(θ) as a cubic in tan θ (the light images at f·tan θ, with distortion),
+// through the frames that show it; empty when fewer than four do.
+std::optional<model::Polynomial> lightCurve(const SweepImage& s) {
+  std::vector<double> t, x;
+  for (int i = 0; i < s.rows(); ++i)
+    if (std::isfinite(s.light_x_px[i])) {
+      t.push_back(std::tan(s.angles_deg[i] * std::numbers::pi / 180));
+      x.push_back(s.light_x_px[i]);
+    }
+  if (t.size() < 4) return std::nullopt;
+  return robustPolynomial(t, x, 3);
+}
+
+// Keeps the pairs whose middle is, as a real ghost's, an odd function about the optical zero: the
+// point of the sweep where the light lies on the axis and every ghost is centred on it. A pair
+// fits the zero at (θz, light's x there = cx) when m − cx = k·u + k₃·u³ (u = the light's x − cx)
+// runs within the tolerance of its middles; the zero is the θz that the most pairs (weighed by
+// their shared frames) fit, and the pairs that do not are dropped: two unrelated borders, or a
+// border and a rim's inner edge, are centred elsewhere. Pairs centred on the light itself (its
+// starburst's fringes on either side) fit every zero, and are the light's image: dropped too.
+template <class Pair>
+void keepPairsThroughTheZero(const SweepImage& s, const CandidateOptions& o, std::vector<Pair>& pairs) {
+  const std::optional<model::Polynomial> light = lightCurve(s);
+  if (!light || pairs.empty()) return;
+  auto light_at = [&](double angle) { return light->evaluate(std::tan(angle * std::numbers::pi / 180)); };
+  std::vector<Pair> off_light;
+  for (auto& p : pairs) {
+    double farthest = 0;
+    for (size_t i = 0; i < p.angles.size(); ++i) farthest = std::max(farthest, std::abs(p.centres[i] - light_at(p.angles[i])));
+    if (farthest > std::max(o.max_centre_rms_px, 0.02 * p.width)) off_light.push_back(std::move(p));
+  }
+  pairs = std::move(off_light);
+  auto rms = [&](const Pair& p, double cx) {
+    Eigen::MatrixXd a(p.angles.size(), 2);
+    Eigen::VectorXd b(p.angles.size());
+    for (size_t i = 0; i < p.angles.size(); ++i) {
+      const double u = light_at(p.angles[i]) - cx;
+      a(i, 0) = u;
+      a(i, 1) = u * u * u * 1e-4;
+      b(i) = p.centres[i] - cx;
+    }
+    const Eigen::VectorXd k = a.colPivHouseholderQr().solve(b);
+    return std::sqrt((a * k - b).squaredNorm() / p.angles.size());
+  };
+  auto fits = [&](const Pair& p, double cx) { return rms(p, cx) <= o.max_centre_rms_px + 0.01 * p.width; };
+  // The zero lies where the light's curve is measured, or a little before its first frame.
+  double lo = 1e9, hi = -1e9;
+  for (int i = 0; i < s.rows(); ++i)
+    if (std::isfinite(s.light_x_px[i])) {
+      lo = std::min(lo, s.angles_deg[i] - 3);
+      hi = std::max(hi, s.angles_deg[i]);
+    }
+  double best_zero = 0, best_support = -1;
+  for (double zero = lo; zero <= hi; zero += 0.05) {
+    double support = 0;
+    for (const auto& p : pairs)
+      if (fits(p, light_at(zero))) support += static_cast<double>(p.angles.size());
+    if (support > best_support) {
+      best_support = support;
+      best_zero = zero;
+    }
+  }
+  std::vector<Pair> kept;
+  for (auto& p : pairs)
+    if (fits(p, light_at(best_zero))) kept.push_back(std::move(p));
+  pairs = std::move(kept);
+}
+
 }  // namespace
 
 bool CandidateOptions::IsValid(std::string* error) const {
@@ -156,9 +238,11 @@ bool CandidateOptions::IsValid(std::string* error) const {
   if (min_shared_rows < 1) return fail("candidates: min_shared_rows must be ≥ 1");
   if (!(max_step_ratio > 1)) return fail("candidates: max_step_ratio must be > 1");
   if (!(max_width_change_per_deg > 0)) return fail("candidates: max_width_change_per_deg must be > 0");
+  if (!(max_centre_rms_px > 0)) return fail("candidates: max_centre_rms_px must be > 0");
   if (!(single_significance > 0)) return fail("candidates: single_significance must be > 0");
   if (!(single_raised_fraction > 0 && single_raised_fraction <= 1))
     return fail("candidates: single_raised_fraction must be in (0, 1]");
+  if (max_hidden_rows < 0) return fail("candidates: max_hidden_rows must be ≥ 0");
   if (profile_half_columns < 0) return fail("candidates: profile_half_columns must be ≥ 0");
   if (!(min_height_fraction > 0 && min_height_fraction < 1))
     return fail("candidates: min_height_fraction must be in (0, 1)");
@@ -176,6 +260,8 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
   struct Pair {
     double score;
     int left, right;
+    std::vector<double> angles, centres;  // the shared frames' centres (x_L + x_R) / 2
+    double width = 0;                     // mean half-width over them
   };
   std::vector<Pair> pairs;
   for (const auto& l : traces) {
@@ -204,9 +290,14 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       const double mean_width = std::accumulate(widths.begin(), widths.end(), 0.0) / widths.size();
       const double growth = w.coefficients.size() > 1 ? std::abs(w.coefficients[1]) / mean_width : 0.0;
       if (growth > o.max_width_change_per_deg) continue;
-      pairs.push_back({steps + growth, l.id, r.id});
+      Pair pair{steps + growth, l.id, r.id, angles, {}, mean_width};
+      for (const auto& p : l.points)
+        if (const BorderPoint* q = r.at(p.row); q && q->x_px > p.x_px + 1 && p.jump > 0 && q->jump > 0)
+          pair.centres.push_back(0.5 * (p.x_px + q->x_px));
+      pairs.push_back(std::move(pair));
     }
   }
+  keepPairsThroughTheZero(s, o, pairs);
   std::sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return a.score < b.score; });
   std::vector<bool> used(traces.size(), false);
   struct Borders {
@@ -222,7 +313,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
   sum.pairs = static_cast<int>(ghosts.size());
   for (const auto& t : traces) {
     if (used[t.id]) continue;
-    if (t.significance >= o.single_significance && raisedToEdge(s, t, o.single_raised_fraction)) {
+    if (t.significance >= o.single_significance && raisedToHidden(s, t, o.single_raised_fraction)) {
       ghosts.push_back(t.side == BorderSide::kLeft ? Borders{t.id, -1} : Borders{-1, t.id});
       ++sum.single;
     } else {
@@ -244,6 +335,21 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
     c.right_trace = r ? r->id : -1;
     c.first_row = std::min(l ? l->firstRow() : s.rows(), r ? r->firstRow() : s.rows());
     c.last_row = std::max(l ? l->lastRow() : -1, r ? r->lastRow() : -1);
+    // On beyond its traces while every border it has is hidden (in the light's zone, or beyond
+    // the frame) and some of it is in the frame: a ghost passes behind the light.
+    auto hidden = [&](int row) {
+      bool in_frame = false;
+      for (const BorderTrace* t : {l, r}) {
+        if (!t) continue;
+        const double x = borderAt(*t, s, row, row)[0];
+        const bool beyond = x < 0 || x > s.width();
+        if (!beyond && !s.inLightZone(row, x)) return false;
+        in_frame |= t == l ? x < s.width() : x > 0;
+      }
+      return in_frame;
+    };
+    for (int k = 0; k < o.max_hidden_rows && c.first_row > 0 && hidden(c.first_row - 1); ++k) --c.first_row;
+    for (int k = 0; k < o.max_hidden_rows && c.last_row + 1 < s.rows() && hidden(c.last_row + 1); ++k) ++c.last_row;
     const int n = c.last_row - c.first_row + 1;
     std::vector<double> angles(s.angles_deg.begin() + c.first_row, s.angles_deg.begin() + c.last_row + 1);
     std::vector<double> xl = l ? borderAt(*l, s, c.first_row, c.last_row) : std::vector<double>();
@@ -267,14 +373,15 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
         mx = 0.5 * (xr[i] + xl[i]);
       } else {
         const double border = l ? xl[i] : xr[i];
-        const double room = l ? s.width() - border : border;  // to the frame's edge
+        // To where the other border lies unseen (the frame's edge, or the light's zone).
+        const double room = std::abs(hiddenFrom(s, row, border, l ? BorderSide::kLeft : BorderSide::kRight) - border);
         const double depth = std::clamp(room / 2, 4.0, 60.0);
         const double column = l ? border + depth : border - depth;
         const std::vector<double> profile =
             verticalProfile(lum, valid, column, s.horizon_y_px, o.profile_half_columns);
-        const double chord = fallingEdge(profile, 1, static_cast<double>(profile.size()));
+        const double chord = fallingEdge(profile, 1, static_cast<double>(profile.size()), c.step, o.max_step_ratio);
         double radius = std::isfinite(chord) ? (chord * chord + depth * depth) / (2 * depth) : room;
-        radius = std::max(radius, room + 1);  // the other border lies beyond the frame
+        radius = std::max(radius, 0.5 * (room + 1));  // the other border lies beyond that
         a0 = radius;
         mx = l ? border + radius : border - radius;
       }
@@ -282,7 +389,8 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       middle[i] = mx;
       const std::vector<double> profile =
           verticalProfile(lum, valid, mx, s.horizon_y_px, o.profile_half_columns);
-      height[i] = fallingEdge(profile, o.min_height_fraction * a0, a0 / o.min_height_fraction);
+      height[i] = fallingEdge(profile, o.min_height_fraction * a0, a0 / o.min_height_fraction, c.step,
+                              o.max_step_ratio);
       // The middle's brightness over the outside's (where the borders are in the frame).
       std::vector<double> outside;
       if (l && xl[i] > 6) outside.push_back(meanOver(s, row, xl[i] - 5, xl[i] - 2));

@@ -7,13 +7,17 @@
 // falling traces are paired by that step, left of right over the frames they share; and a ghost
 // keeps its size as it moves (paraxially exactly), so the two borders of a pair move alike. The
 // closest pair (steps, and the change of the distance between the borders) first, each trace in
-// one pair. Nested and overlapping ghosts give separate pairs.
+// one pair. Nested and overlapping ghosts give separate pairs. A pair's middle must be, as a real
+// ghost's, an odd function about the optical zero (fit/horizon.h): pairs of two unrelated borders,
+// or of a border and a rim's inner edge, are centred elsewhere.
 //
-// A trace left over is a ghost whose other border lies outside the frame when S stays raised by
-// its step from the trace to the frame's edge on the ghost's side (a large ghost at some angles);
-// otherwise it is an edge inside a ghost (a caustic's rim or fold) and no ghost of its own.
+// A trace left over is a ghost whose other border is hidden (beyond the frame, or in the light's
+// zone) when S stays raised by its step from the trace to there on the ghost's side (a large ghost
+// at some angles, a ghost about the light); otherwise it is an edge inside a ghost (a caustic's
+// rim or fold) and no ghost of its own.
 //
-// Each ghost gets its angle range (its traces' frames) and, at every frame in it, a seed: Mx, L,
+// Each ghost gets its angle range (its traces' frames, and on while its borders are hidden in the
+// light's zone or beyond the frame) and, at every frame in it, a seed: Mx, L,
 // R from its borders (the unseen one from the other's distance to the ghost's middle, itself on
 // the model's odd curve about the optical axis where it can be), h from the vertical profile of
 // the frame through Mx (where it falls by the borders' step), Ib from the step, Ii from S in the
@@ -32,8 +36,10 @@ struct CandidateOptions {
   int min_shared_rows = 3;          // a pair's traces share at least this many frames (≥ 1)
   double max_step_ratio = 2.5;      // their steps differ by at most this factor (> 1)
   double max_width_change_per_deg = 0.15;  // their distance changes by at most this fraction a degree
+  double max_centre_rms_px = 2;     // their middle's distance from an odd curve about the zero
   double single_significance = 20;  // a lone trace's significance to stand for a ghost (> 0)
   double single_raised_fraction = 0.5;  // S stays this fraction of its step above the outside
+  int max_hidden_rows = 30;         // a ghost goes on this many frames beyond its traces when hidden
   int profile_half_columns = 2;     // columns averaged on each side of Mx for h (≥ 0)
   double min_height_fraction = 0.3; // h is searched within [this, 1/this] × the half-width
   double seed_outside_falloff_px = 2;  // Fo of the seeds, pixels (> 0)

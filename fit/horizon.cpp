@@ -156,6 +156,76 @@ Horizon measureHorizon(const FrameStack& stack, const HorizonOptions& options) {
   return h;
 }
 
+// ── The light's pattern ─────────────────────────────────────────────────────────────────────────
+
+bool LightPatternOptions::IsValid(std::string* error) const {
+  if (radius_px >= 1 && percentile > 0 && percentile < 1 && min_frames >= 1) return true;
+  if (error) *error = "light pattern: need radius_px ≥ 1, percentile in (0, 1), min_frames ≥ 1";
+  return false;
+}
+
+LightPattern measureLightPattern(const FrameStack& stack, const Horizon& horizon,
+                                 const LightPatternOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  LightPattern pattern;
+  std::vector<size_t> frames;
+  for (size_t i = 0; i < horizon.lights.size(); ++i)
+    if (horizon.lights[i].found) frames.push_back(i);
+  if (static_cast<int>(frames.size()) < options.min_frames) return pattern;
+  const int r = options.radius_px, side = 2 * r + 1;
+  std::vector<cv::Mat> lums(frames.size());
+  tbb::parallel_for(size_t{0}, frames.size(), [&](size_t k) { lums[k] = luminance(stack.frames[frames[k]].image); });
+  pattern.image = cv::Mat::zeros(side, side, CV_32F);
+  pattern.radius_px = r;
+  tbb::parallel_for(0, side, [&](int v) {
+    std::vector<float> samples;
+    for (int u = 0; u < side; ++u) {
+      samples.clear();
+      for (size_t k = 0; k < frames.size(); ++k) {
+        const cv::Point2d c = horizon.lights[frames[k]].center;
+        const int x = static_cast<int>(std::floor(c.x)) + u - r, y = static_cast<int>(std::floor(c.y)) + v - r;
+        if (x < 0 || y < 0 || x >= lums[k].cols || y >= lums[k].rows) continue;
+        samples.push_back(lums[k].at<float>(y, x));
+      }
+      if (static_cast<int>(samples.size()) < options.min_frames) continue;
+      const size_t q = static_cast<size_t>(options.percentile * (samples.size() - 1));
+      std::nth_element(samples.begin(), samples.begin() + q, samples.end());
+      pattern.image.at<float>(v, u) = samples[q];
+    }
+  });
+  // Less what lies at the window's edge: the veils under the light are not its.
+  std::vector<float> edge;
+  for (int k = 0; k < side; ++k)
+    for (float e : {pattern.image.at<float>(0, k), pattern.image.at<float>(side - 1, k),
+                    pattern.image.at<float>(k, 0), pattern.image.at<float>(k, side - 1)})
+      edge.push_back(e);
+  std::nth_element(edge.begin(), edge.begin() + edge.size() / 2, edge.end());
+  pattern.image = cv::max(pattern.image - edge[edge.size() / 2], 0.0f);
+  return pattern;
+}
+
+void LightPattern::takeOut(const LightImage& light, cv::Mat& image, cv::Mat& valid) const {
+  if (this->image.empty() || !light.found) return;
+  const int r = radius_px, channels = image.channels();
+  const int cx = static_cast<int>(std::floor(light.center.x)), cy = static_cast<int>(std::floor(light.center.y));
+  const cv::Mat lum = luminance(image);
+  for (int v = 0; v <= 2 * r; ++v) {
+    const int y = cy + v - r;
+    if (y < 0 || y >= image.rows) continue;
+    float* row = image.ptr<float>(y);
+    for (int u = 0; u <= 2 * r; ++u) {
+      const int x = cx + u - r;
+      if (x < 0 || x >= image.cols) continue;
+      const float p = this->image.at<float>(v, u);
+      if (p <= 0) continue;
+      // Where the light outshines what lies under it, nothing under it can be measured.
+      if (p > lum.at<float>(y, x) - p) valid.at<uchar>(y, x) = 0;
+      for (int c = 0; c < channels; ++c) row[x * channels + c] = std::max(0.0f, row[x * channels + c] - p);
+    }
+  }
+}
+
 // ── Optical zero ───────────────────────────────────────────────────────────────────────────────
 
 bool OpticalZeroOptions::IsValid(std::string* error) const {

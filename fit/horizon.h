@@ -53,6 +53,31 @@ struct Horizon {
   int lights_found = 0;
 };
 
+// The light's own image (core, halo, starburst): the same in every frame that shows it, moved
+// with the light. Its percentile over those frames at each offset from the light's centre keeps it
+// and drops the ghosts (which move at other rates); less what lies at the window's edge (the veils
+// under it).
+struct LightPattern {
+  cv::Mat image;       // CV_32F, (2 r + 1)², centred on the light's centre; empty without one
+  int radius_px = 0;   // r
+
+  // Takes the light's image out of a frame whose light is `light`: `image` less the pattern
+  // (luminance scaled per channel alike), and `valid` cleared where the light outshines what
+  // lies under it (its core and the bright part of its starburst). Nothing without a light.
+  void takeOut(const LightImage& light, cv::Mat& image, cv::Mat& valid) const;
+};
+
+struct LightPatternOptions {
+  int radius_px = 80;          // half-size of the pattern, pixels (≥ 1)
+  double percentile = 0.2;     // of the frames that show the light, at each offset (0, 1)
+  int min_frames = 5;          // fewer frames with the light: no pattern (≥ 1)
+
+  bool IsValid(std::string* error) const;
+};
+
+LightPattern measureLightPattern(const FrameStack& stack, const Horizon& horizon,
+                                 const LightPatternOptions& options = {});
+
 // Measures the horizon and the light's image in every frame. Works on any stack; a stack that
 // shows no light gets the symmetry row alone.
 Horizon measureHorizon(const FrameStack& stack, const HorizonOptions& options = {});

@@ -31,7 +31,9 @@ struct GhostCurves {
   std::vector<double> block;            // all coefficients, parameter after parameter
 
   bool covers(double angle) const { return angle >= angle_min && angle <= angle_max; }
-  // The parameters at θ from the block's current coefficients, clamped to the model's bounds.
+  std::vector<model::ParameterBounds> bounds;  // the fitter's (fit/cost.h fitBounds)
+
+  // The parameters at θ from the block's current coefficients, within `bounds`.
   model::GhostParameters at(double angle, int channels, const double* coefficients) const {
     std::vector<double> v(parameters.size());
     for (size_t k = 0; k < parameters.size(); ++k) {
@@ -39,9 +41,9 @@ struct GhostCurves {
       const int n = static_cast<int>(parameters[k].coefficients.size());
       double value = 0;
       for (int m = n - 1; m >= 0; --m) value = value * u + coefficients[offset[k] + m];
-      v[k] = value;
+      v[k] = std::clamp(value, bounds[k].lower, bounds[k].upper);
     }
-    return model::clampToBounds(model::fromParameterVector(v, channels));
+    return model::fromParameterVector(v, channels);
   }
   void storeBlock() {
     block.clear();
@@ -194,23 +196,10 @@ int levelWithin(cv::Size size, int pixels) {
   return std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(size.area()) / pixels))));
 }
 
-// The pedestal of the whole frame `signed` (not clamped), for subtracting it.
-cv::Mat signedPedestal(const model::Pedestal& p, cv::Size size, int channels) {
-  cv::Mat out = cv::Mat::zeros(size, CV_32FC(channels));
-  if (p.empty()) return out;
-  for (int y = 0; y < size.height; ++y) {
-    float* row = out.ptr<float>(y);
-    for (int x = 0; x < size.width; ++x)
-      for (int c = 0; c < channels; ++c) row[x * channels + c] = static_cast<float>(p.at({x + 0.5, y + 0.5}, size, c));
-  }
-  return out;
-}
 
-// `p` as a polynomial that stays within parameter `index`'s bounds over [lo, hi] (where the model
-// file is checked): where it strays, the least-squares polynomial through its values clamped to
+// `p` as a polynomial that stays within bounds `b` over [lo, hi] (where the model file is checked): where it strays, the least-squares polynomial through its values clamped to
 // the bounds, of the highest degree that stays within them.
-model::Polynomial withinBounds(const ScaledPolynomial& p, int index, int channels, double lo, double hi) {
-  const model::ParameterBounds b = model::parameterBounds(index, channels);
+model::Polynomial withinBounds(const ScaledPolynomial& p, const model::ParameterBounds& b, double lo, double hi) {
   constexpr int kChecks = 129;
   auto inside = [&](const model::Polynomial& q) {
     for (int i = 0; i < kChecks; ++i) {
@@ -253,9 +242,19 @@ bool ModelFitOptions::IsValid(std::string* error) const {
   return true;
 }
 
-model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandidate>& candidates,
+model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, const LightPattern& pattern,
+                           const std::vector<GhostCandidate>& candidates,
                            const std::vector<FrameFit>& fits, const OpticalZero& zero,
-                           double horizon_y_px, const ModelFitOptions& o, ModelFitSummary* summary) {
+                           const ModelFitOptions& o, ModelFitSummary* summary) {
+  const double horizon_y_px = horizon.y_px;
+  // The frames as the fit measures them: the light's image taken out.
+  auto withoutLight = [&](size_t i) {
+    Frame f = stack.frames[i];
+    f.image = f.image.clone();
+    f.valid = f.valid.clone();
+    pattern.takeOut(horizon.lights[i], f.image, f.valid);
+    return f;
+  };
   std::string error;
   if (!o.IsValid(&error)) throw std::invalid_argument(error);
   ModelFitSummary sum;
@@ -287,6 +286,8 @@ model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandi
     const auto& [angles, ghosts] = it->second;
     GhostCurves g;
     g.id = c.id;
+    for (int k = 0; k < p; ++k)
+      g.bounds.push_back(fitBounds(k, channels, stack.size, model::kUnbounded, false));
     g.angle_min = std::max(capture_min, m.capture.fieldAngle(stack.frames[c.first_row].angle_deg) - half_step);
     g.angle_max = std::min(capture_max, m.capture.fieldAngle(stack.frames[c.last_row].angle_deg) + half_step);
     for (int k = 0; k < p; ++k) {
@@ -320,11 +321,12 @@ model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandi
       for (size_t g = 0; g < curves.size(); ++g)
         if (curves[g].covers(rf.angle)) rf.ghosts.push_back(static_cast<int>(g));
       if (rf.ghosts.empty()) continue;
-      cv::Mat target = stack.frames[i].image;
+      const Frame f = withoutLight(i);
+      cv::Mat target = f.image;
       if (auto it = fit_of_frame.find(static_cast<int>(i)); it != fit_of_frame.end())
-        target = target - signedPedestal(it->second->pedestal, stack.size, channels);
+        target = target - it->second->pedestal.image(stack.size);
       const double sigma = estimatePixelNoiseSigma(stack.frames[i].image, stack.frames[i].valid);
-      rf.pyramid = std::make_unique<FramePyramid>(target, stack.frames[i].valid, edge, sigma);
+      rf.pyramid = std::make_unique<FramePyramid>(target, f.valid, edge, sigma);
       frames.push_back(std::move(rf));
     }
     // Each frame's cost over the whole frame at one level.
@@ -368,7 +370,7 @@ model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandi
     t.angle_min_deg = c.angle_min;
     t.angle_max_deg = c.angle_max;
     for (size_t k = 0; k < c.parameters.size(); ++k)
-      t.parameters.push_back(withinBounds(c.parameters[k], static_cast<int>(k), channels, c.angle_min, c.angle_max));
+      t.parameters.push_back(withinBounds(c.parameters[k], c.bounds[k], c.angle_min, c.angle_max));
     m.ghosts.push_back(std::move(t));
   }
   sum.ghosts = static_cast<int>(m.ghosts.size());
@@ -381,7 +383,7 @@ model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandi
     std::vector<model::Pedestal> pedestals(stack.frames.size());
     std::vector<double> sigmas(stack.frames.size());
     tbb::parallel_for(size_t{0}, stack.frames.size(), [&](size_t i) {
-      const Frame& f = stack.frames[i];
+      const Frame f = withoutLight(i);
       angles[i] = m.capture.fieldAngle(f.angle_deg);
       const cv::Size size(stack.size.width / k, stack.size.height / k);
       const cv::Rect whole(0, 0, size.width * k, size.height * k);

@@ -48,11 +48,13 @@ struct ModelFitSummary {
   double seconds_polynomials = 0, seconds_refine = 0, seconds_pedestal = 0;
 };
 
-// The model from the frame fits (`fits`, at frames of `stack`) of `candidates`. `info` is the
-// capture's metadata (written into the model with the optical zero and horizon).
-model::FlareModel fitModel(const FrameStack& stack, const std::vector<GhostCandidate>& candidates,
+// The model from the frame fits (`fits`, at frames of `stack`) of `candidates`, measured against
+// the frames with the light's image taken out (`pattern` at `horizon`'s lights). The model
+// records the capture's metadata, the optical zero and the horizon.
+model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, const LightPattern& pattern,
+                           const std::vector<GhostCandidate>& candidates,
                            const std::vector<FrameFit>& fits, const OpticalZero& zero,
-                           double horizon_y_px, const ModelFitOptions& options,
+                           const ModelFitOptions& options,
                            ModelFitSummary* summary = nullptr);
 
 }  // namespace flarekit::fit

@@ -146,6 +146,8 @@ bool SweepOptions::IsValid(std::string* error) const {
   if (max_gap_rows < 0) return fail("sweep: max_gap_rows must be ≥ 0");
   if (min_trace_rows < 2) return fail("sweep: min_trace_rows must be ≥ 2");
   if (!(min_significance > 0)) return fail("sweep: min_significance must be > 0");
+  if (kink_rows < 2) return fail("sweep: kink_rows must be ≥ 2");
+  if (!(max_kink_px_per_row > 0)) return fail("sweep: max_kink_px_per_row must be > 0");
   if (max_join_gap_rows < 0) return fail("sweep: max_join_gap_rows must be ≥ 0");
   if (!(join_tolerance_px > 0)) return fail("sweep: join_tolerance_px must be > 0");
   return true;
@@ -226,6 +228,12 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
     const double edge = std::isfinite(left) && std::isfinite(right) ? std::max(left, right)
                         : std::isfinite(left)                       ? left
                                                                     : right;
+    // The light's zone: its clipped core (no profile there), out from its centre.
+    for (int side : {-1, 1}) {
+      int d = 0;
+      while (d + 1 <= window && !std::isfinite(profile[window + side * (d + 1)])) ++d;
+      (side < 0 ? s.light_zone_left_px : s.light_zone_right_px) = d;
+    }
     if (std::isfinite(edge))
       for (double& p : profile) p = std::isfinite(p) ? std::max(0.0, p - edge) : 0.0;
     else
@@ -266,7 +274,8 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
   s.edge = (derivative - runningMedian(derivative, static_cast<int>(std::ceil(2 * options.trend_sigma_px))))
                .mul(scale);
 
-  // Masked: within reach of an invalid point (the light's clipped core) or the frame's edge.
+  // Masked: within reach of an invalid point (the light's clipped core) or the frame's edge, and
+  // the light's zone.
   cv::Mat invalid = s.valid == 0;
   const int reach = static_cast<int>(std::ceil(3 * options.edge_sigma_px));
   cv::Mat near_invalid;
@@ -274,6 +283,11 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
   s.valid = near_invalid == 0;
   s.valid.colRange(0, std::min(w, reach)).setTo(0);
   s.valid.colRange(std::max(0, w - reach), w).setTo(0);
+  for (int i = 0; i < rows; ++i) {
+    if (!std::isfinite(s.light_x_px[i])) continue;
+    for (int x = 0; x < w; ++x)
+      if (s.inLightZone(i, x + 0.5)) s.valid.at<uchar>(i, x) = 0;
+  }
   // In σ of the response: its robust spread over the valid points (the filters' gain and the
   // rows' correlation in one factor).
   std::vector<float> magnitudes;
@@ -399,6 +413,56 @@ bool continues(const BorderTrace& earlier, const BorderTrace& later, const Sweep
   return std::sqrt(sum / angles.size()) <= 0.5 * o.join_tolerance_px && worst <= 2 * o.join_tolerance_px;
 }
 
+// A border's slope changes slowly; where a trace's slope before and after a point differs by more
+// than max_kink_px_per_row (lines through the kink_rows points on either side), the linking passed
+// from one border onto another that crossed it: the trace is split there (at the largest change).
+std::vector<BorderTrace> splitAtKinks(BorderTrace t, const SweepOptions& o) {
+  const int n = static_cast<int>(t.points.size());
+  const int k = o.kink_rows;
+  auto slope = [&](int from, int to) {  // least-squares slope of points [from, to)
+    double sw = 0, sr = 0, sx = 0, srr = 0, srx = 0;
+    for (int i = from; i < to; ++i) {
+      const double r = t.points[i].row, x = t.points[i].x_px;
+      sw += 1;
+      sr += r;
+      sx += x;
+      srr += r * r;
+      srx += r * x;
+    }
+    const double den = sw * srr - sr * sr;
+    return den > 1e-9 ? (sw * srx - sr * sx) / den : 0.0;
+  };
+  int best = -1;
+  double largest = o.max_kink_px_per_row;
+  for (int i = k; i + k <= n; ++i)
+    if (const double change = std::abs(slope(i - k, i) - slope(i, i + k)); change > largest) {
+      largest = change;
+      best = i;
+    }
+  if (best < 0) return {std::move(t)};
+  BorderTrace later = t;
+  later.points.erase(later.points.begin(), later.points.begin() + best);
+  t.points.resize(best);
+  std::vector<BorderTrace> out = splitAtKinks(std::move(t), o);
+  for (auto& piece : splitAtKinks(std::move(later), o)) out.push_back(std::move(piece));
+  return out;
+}
+
+// Whether a trace keeps its distance from the light (within 2 px, over five frames or more that
+// show the light, most of its own): a fringe of the light's own image, never a ghost's border.
+bool movesWithLight(const BorderTrace& t, const SweepImage& s) {
+  double lo = 1e9, hi = -1e9;
+  int n = 0;
+  for (const auto& p : t.points)
+    if (std::isfinite(s.light_x_px[p.row])) {
+      const double d = p.x_px - s.light_x_px[p.row];
+      lo = std::min(lo, d);
+      hi = std::max(hi, d);
+      ++n;
+    }
+  return n >= 5 && n * 2 >= static_cast<int>(t.points.size()) && hi - lo <= 2;
+}
+
 }  // namespace
 
 std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) {
@@ -451,13 +515,15 @@ std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) 
     }
     for (auto& g : active) done.push_back(std::move(g.trace));
   }
-  // Pieces of three points or more (fewer cannot show where they go).
+  // Pieces of three points or more (fewer cannot show where they go), split where the linking
+  // went from one border onto another, and the light's own fringes left out.
   std::vector<BorderTrace> traces;
-  for (auto& t : done)
-    if (t.points.size() >= 3) {
-      finish(t, s);
-      traces.push_back(std::move(t));
-    }
+  for (auto& whole : done)
+    for (auto& t : splitAtKinks(std::move(whole), o))
+      if (t.points.size() >= 3 && !movesWithLight(t, s)) {
+        finish(t, s);
+        traces.push_back(std::move(t));
+      }
   // Each piece, earliest first, takes the nearest later piece that continues it, until none does.
   std::sort(traces.begin(), traces.end(),
             [](const BorderTrace& a, const BorderTrace& b) { return a.firstRow() < b.firstRow(); });

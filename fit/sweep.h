@@ -9,15 +9,17 @@
 //
 // The light's own profile along the horizon is the same in every frame that shows it, moved with
 // the light: its percentile over those frames, at each distance from the light's centre, is taken
-// out of S, so that its halo and the fringes of its starburst draw no borders; its clipped core
-// is masked.
+// out of S, so that its halo and the fringes of its starburst draw no borders; its zone, the
+// clipped core on the horizon, is masked.
 //
 // Borders are edges along x: the derivative of Gaussian of log S less its running median over
-// ±2 trend_sigma_px (the smooth slope under the borders, which is no border), in σ of its noise (from a shot + read noise model measured on the mirrored rows' differences). A left
+// ±2 trend_sigma_px (the smooth slope under the borders, which is no border), in σ of its noise
+// (from a shot + read noise model measured on the mirrored rows' differences). A left
 // border rises, a right border falls. Trace points are the local extrema beyond peak_sigma; they
-// are linked over θ by their predicted position (a line through the trace's last points), and
-// the pieces of one border that the light or a crossing border interrupted are joined where one
-// low-degree polynomial runs through both.
+// are linked over θ by their predicted position (a line through the trace's last points), split
+// where their slope kinks (the linking passed onto a crossing border), the light's fringes (which
+// keep their distance from it) left out, and the pieces of one border that the light or a
+// crossing border interrupted are joined where one low-degree polynomial runs through both.
 
 #include <string>
 #include <vector>
@@ -42,6 +44,8 @@ struct SweepOptions {
   int max_gap_rows = 4;             // a trace goes on after this many frames without a point
   int min_trace_rows = 5;           // shorter traces are dropped (≥ 2)
   double min_significance = 10;     // a trace's Σ strength / √points, noise σ (> 0)
+  int kink_rows = 5;                // a trace's slope is taken over this many frames (≥ 2)
+  double max_kink_px_per_row = 1;   // and split where it changes by more than this (> 0)
   int max_join_gap_rows = 25;       // pieces of one border this many frames apart are joined
   double join_tolerance_px = 2;     // if one polynomial runs within this of both (RMS: half)
 
@@ -57,6 +61,14 @@ struct SweepImage {
   cv::Mat noise;                   // CV_32F: noise σ of `radiance` at each point
   cv::Mat edge;                    // CV_32F: border response of log(radiance − light), in σ
   std::vector<double> light_x_px;  // the light's centre per row (NaN outside the frame)
+  double light_zone_left_px = 0;   // the light's zone reaches this far to its left and right
+  double light_zone_right_px = 0;
+
+  // Whether x lies in the light's zone at `row` (where no border is traced).
+  bool inLightZone(int row, double x) const {
+    const double d = x - light_x_px[row];
+    return d > -light_zone_left_px && d < light_zone_right_px;  // false where the light is absent
+  }
 
   int rows() const { return radiance.rows; }
   int width() const { return radiance.cols; }

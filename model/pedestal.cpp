@@ -55,4 +55,16 @@ void Pedestal::addTo(cv::Mat& image, cv::Size capture_size, const ViewTransform&
   }
 }
 
+cv::Mat Pedestal::image(cv::Size capture_size) const {
+  cv::Mat out = cv::Mat::zeros(capture_size, CV_32FC(channels));
+  if (empty()) return out;
+  for (int y = 0; y < capture_size.height; ++y) {
+    float* row = out.ptr<float>(y);
+    for (int x = 0; x < capture_size.width; ++x)
+      for (int c = 0; c < channels; ++c)
+        row[x * channels + c] = static_cast<float>(at({x + 0.5, y + 0.5}, capture_size, c));
+  }
+  return out;
+}
+
 }  // namespace flarekit::model

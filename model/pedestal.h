@@ -49,6 +49,8 @@ struct Pedestal {
   // to the capture's pixels through `view` (modelFromImage) as renderGhosts maps them, and clamps
   // the sum at 0. Leaves `image` as it is when empty.
   void addTo(cv::Mat& image, cv::Size capture_size, const ViewTransform& view = {}) const;
+  // The pedestal over the whole capture, CV_32FC(channels), not clamped (zeros when empty).
+  cv::Mat image(cv::Size capture_size) const;
 };
 
 }  // namespace flarekit::model

@@ -1,0 +1,35 @@
+#pragma once
+// The shade of a frame's ghosts and its pedestal by linear least squares. With every outline and
+// fall-off fixed, a frame's model image is linear in each ghost's Ib and Ii and in the pedestal's
+// terms (model/intensity.h, model/pedestal.h), so all of them are solved at once, per channel:
+// overlapping ghosts share the light they overlap in, which one at a time they trade freely.
+// Robust (Tukey's biweight at outlier_sigma noise σ of the residual, reweighted), and Ib, Ii ≥ 0
+// (an active set: a negative one is held at 0 and the rest solved again).
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "model/ghost_shape.h"
+#include "model/pedestal.h"
+
+namespace flarekit::fit {
+
+struct ShadeOptions {
+  int level = 2;               // solved on k×k averages of the frame (≥ 1)
+  double outlier_sigma = 6;    // Tukey's biweight, in noise σ (> 0)
+  int iterations = 3;          // reweighting passes (≥ 1)
+  bool pedestal = true;        // solve the pedestal's terms too
+
+  bool IsValid(std::string* error) const;
+};
+
+// Sets Ib and Ii of every ghost (channel by channel) and `pedestal` (when options.pedestal) to the
+// least-squares values for `image` (the frame, CV_32FC(channels), capture pixels) over its
+// `valid` pixels. `noise_sigma`: the frame's pixel noise σ (the outliers' scale).
+void fitShades(const cv::Mat& image, const cv::Mat& valid, double noise_sigma,
+               std::vector<model::GhostParameters>& ghosts, model::Pedestal* pedestal,
+               const ShadeOptions& options = {});
+
+}  // namespace flarekit::fit
