@@ -69,9 +69,9 @@ void registerFit(CLI::App& app) {
   struct Options {
     StackArgs stack;
     std::string out, optimizer = "ceres", holdout, report;
-    int threads = 2, frame_stride = 1;
+    int threads = 2, frame_stride = 2;
     double edge_weight = -1;
-    bool refine = true, pedestal = true;
+    bool refine = false, pedestal = true;
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
@@ -87,9 +87,9 @@ void registerFit(CLI::App& app) {
                   "Folder for the summary, the sweep picture, each ghost's frame fits and contact sheets");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   cmd->add_option("--edge-weight", o->edge_weight, "λ, the edge term's weight (default 1)");
-  cmd->add_option("--frame-stride", o->frame_stride, "Fit every n-th frame one by one (default 1)");
+  cmd->add_option("--frame-stride", o->frame_stride, "Fit every n-th frame one by one (default 2)");
   cmd->add_flag("--refine,!--no-refine", o->refine,
-                "Refine the polynomials against the frames themselves (default)");
+                "Also refine the polynomials against the frames themselves in one Ceres problem (off by default: see docs/fitting.md)");
   cmd->add_flag("--pedestal,!--no-pedestal", o->pedestal,
                 "Fit the pedestal, the smooth glow of veils wider than the frame (default)");
   addStackOptions(cmd, o->stack);

@@ -13,6 +13,7 @@
 #include "common/progress.h"
 #include "fit/normal_equations.h"
 #include "fit/polynomial.h"
+#include "fit/shade.h"
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {
@@ -44,6 +45,14 @@ struct GhostCurves {
       v[k] = std::clamp(value, bounds[k].lower, bounds[k].upper);
     }
     return model::fromParameterVector(v, channels);
+  }
+  // Whether parameter k at θ lies beyond its bounds (and is held at one).
+  bool clamped(int k, double angle, const double* coefficients) const {
+    const double u = parameters[k].variable(angle);
+    double value = 0;
+    for (int m = static_cast<int>(parameters[k].coefficients.size()) - 1; m >= 0; --m)
+      value = value * u + coefficients[offset[k] + m];
+    return value < bounds[k].lower || value > bounds[k].upper;
   }
   void storeBlock() {
     block.clear();
@@ -103,6 +112,8 @@ class ModelEquations {
         t[j] = Eigen::MatrixXd::Zero(p, static_cast<Eigen::Index>(c.block.size()));
         for (int k = 0; k < p; ++k) {
           if (k == model::param::kMy) continue;  // held on the horizon
+          // A parameter held at its bound does not move with its coefficients.
+          if (c.clamped(k, f.angle, c.block.data())) continue;
           const double u = c.parameters[k].variable(f.angle);
           double power = 1;
           for (size_t m = 0; m < c.parameters[k].coefficients.size(); ++m, power *= u)
@@ -239,6 +250,7 @@ bool ModelFitOptions::IsValid(std::string* error) const {
   if (pedestal_degree < 0 || pedestal_degree > model::kMaxPolynomialDegree)
     return fail("model fit: pedestal_degree must be 0–10");
   if (pedestal_level < 1) return fail("model fit: pedestal_level must be ≥ 1");
+  if (!shade.IsValid(error)) return false;
   return true;
 }
 
@@ -280,6 +292,9 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
       s.second.push_back(f.ghosts[j]);
     }
   std::vector<GhostCurves> curves;
+  // Each fitted frame's pedestal under the model's ghosts (from the frame fits, then the shades).
+  std::map<int, model::Pedestal> pedestal_of_frame;
+  for (const auto& f : fits) pedestal_of_frame[f.frame] = f.pedestal;
   for (const auto& c : candidates) {
     auto it = samples.find(c.id);
     if (it == samples.end() || it->second.first.empty()) continue;
@@ -302,6 +317,50 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     g.storeBlock();
     curves.push_back(std::move(g));
   }
+  // The shades again, for the model's own outlines: every fitted frame's Ib and Ii solved together
+  // with its pedestal (fit/shade.h) for the polynomials' shapes there, then their polynomials. A
+  // frame fit's shade answers to its own outline; the model's to the polynomials'.
+  if (o.reshade && !curves.empty()) {
+    std::vector<std::vector<std::pair<int, model::GhostParameters>>> shaded(fits.size());
+    std::vector<model::Pedestal> pedestals(fits.size());
+    tbb::parallel_for(size_t{0}, fits.size(), [&](size_t i) {
+      const double angle = m.capture.fieldAngle(fits[i].angle_deg);
+      std::vector<int> present;
+      std::vector<model::GhostParameters> ghosts;
+      for (size_t g = 0; g < curves.size(); ++g)
+        if (curves[g].covers(angle)) {
+          present.push_back(static_cast<int>(g));
+          ghosts.push_back(curves[g].at(angle, channels, curves[g].block.data()));
+        }
+      if (ghosts.empty()) return;
+      const Frame f = withoutLight(static_cast<size_t>(fits[i].frame));
+      fitShades(f.image, f.valid, fits[i].noise_sigma, ghosts, &pedestals[i], o.shade);
+      for (size_t j = 0; j < present.size(); ++j) shaded[i].emplace_back(present[j], ghosts[j]);
+    });
+    const model::ParameterLayout layout{channels};
+    for (size_t g = 0; g < curves.size(); ++g) {
+      std::vector<double> angles;
+      std::vector<model::GhostParameters> values;
+      for (size_t i = 0; i < fits.size(); ++i)
+        for (const auto& [id, ghost] : shaded[i])
+          if (id == static_cast<int>(g)) {
+            angles.push_back(m.capture.fieldAngle(fits[i].angle_deg));
+            values.push_back(ghost);
+          }
+      if (angles.empty()) continue;
+      for (int c = 0; c < channels; ++c)
+        for (int k : {layout.ib(c), layout.ii(c)}) {
+          std::vector<double> v;
+          for (const auto& q : values) v.push_back(model::toParameterVector(q)[k]);
+          const int degree = std::min(degreeByValidation(angles, v, o.min_degree, o.max_degree),
+                                      static_cast<int>(angles.size()) - 1);
+          curves[g].parameters[k] = ScaledPolynomial::from(robustPolynomial(angles, v, degree),
+                                                           curves[g].angle_min, curves[g].angle_max);
+        }
+      curves[g].storeBlock();
+    }
+    for (size_t i = 0; i < fits.size(); ++i) pedestal_of_frame[fits[i].frame] = pedestals[i];
+  }
   sum.seconds_polynomials = since(t_poly);
 
   // 2. The coefficients refined against the frames.
@@ -313,8 +372,6 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     cost.whole_frame = true;  // the ghosts move while refined: the region must not follow the seeds
     const EdgeFilter edge(cost);
     std::vector<RefineFrame> frames;
-    std::map<int, const FrameFit*> fit_of_frame;
-    for (const auto& f : fits) fit_of_frame[f.frame] = &f;
     for (size_t i = 0; i < stack.frames.size(); i += o.refine_frame_stride) {
       RefineFrame rf;
       rf.angle = m.capture.fieldAngle(stack.frames[i].angle_deg);
@@ -323,8 +380,8 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
       if (rf.ghosts.empty()) continue;
       const Frame f = withoutLight(i);
       cv::Mat target = f.image;
-      if (auto it = fit_of_frame.find(static_cast<int>(i)); it != fit_of_frame.end())
-        target = target - it->second->pedestal.image(stack.size);
+      if (auto it = pedestal_of_frame.find(static_cast<int>(i)); it != pedestal_of_frame.end())
+        target = target - it->second.image(stack.size);
       const double sigma = estimatePixelNoiseSigma(stack.frames[i].image, stack.frames[i].valid);
       rf.pyramid = std::make_unique<FramePyramid>(target, f.valid, edge, sigma);
       frames.push_back(std::move(rf));

@@ -3,7 +3,8 @@
 //
 // First each ghost's parameters become polynomials in the field angle θ − θ0 (the optical zero)
 // by robust least squares over its frame fits, each of the degree that predicts held-out fits
-// best. Then the coefficients themselves are refined against the frames directly, in one Ceres
+// best; their shades then solved again for those outlines in every frame (fit/shade.h) and made
+// polynomials. Then the coefficients themselves are refined against the frames directly, in one Ceres
 // problem whose parameter blocks are each ghost's coefficients and whose residuals are the
 // frames' pixels (a stride of frames, each at a level of its pyramid): the model is what is
 // scored, so it is what is optimised. Each frame's residuals are in units of its brightest
@@ -19,6 +20,7 @@
 #include "fit/ghost_candidates.h"
 #include "fit/horizon.h"
 #include "fit/pedestal.h"
+#include "fit/shade.h"
 #include "model/flare_model.h"
 
 namespace flarekit::fit {
@@ -26,7 +28,9 @@ namespace flarekit::fit {
 struct ModelFitOptions {
   int min_degree = 1;                  // polynomial degrees tried by validation (≥ 0)
   int max_degree = 4;                  // (min_degree … kMaxPolynomialDegree)
-  bool refine = true;                  // refine the coefficients against the frames
+  bool reshade = true;                 // the shades again for the polynomials' outlines
+  ShadeOptions shade;                  // how (fit/shade.h)
+  bool refine = false;                 // refine the coefficients against the frames (docs/fitting.md)
   int refine_frame_stride = 3;         // the refinement uses every n-th frame of the capture (≥ 1)
   int refine_pixels = 30000;           // each such frame at the first level within this many pixels
   int refine_iterations = 10;          // Levenberg–Marquardt iterations of the refinement (≥ 1)
