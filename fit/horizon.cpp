@@ -16,6 +16,21 @@ namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180;
 
+double quantileOfValid(const cv::Mat& lum, const cv::Mat& valid, double q) {
+  std::vector<float> v;
+  v.reserve(lum.total() / 4);
+  for (int y = 0; y < lum.rows; y += 2) {
+    const float* p = lum.ptr<float>(y);
+    const uchar* ok = valid.ptr<uchar>(y);
+    for (int x = 0; x < lum.cols; x += 2)
+      if (ok[x]) v.push_back(p[x]);
+  }
+  if (v.empty()) return 0;
+  const size_t k = static_cast<size_t>(q * (v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[k];
+}
+
 double medianOfValid(const cv::Mat& lum, const cv::Mat& valid) {
   std::vector<float> v;
   v.reserve(lum.total() / 4);
@@ -37,8 +52,15 @@ LightImage findLight(const cv::Mat& lum, const cv::Mat& valid, double contrast) 
   double peak = 0;
   cv::Point at;
   cv::minMaxLoc(lum, nullptr, &peak, nullptr, &at);
-  const double median = medianOfValid(lum, valid);
-  if (!(peak > contrast * std::max(median, 1e-30))) return light;
+  // The light clips, or (behind a filter) outshines the frame's brightest ghosts by far.
+  bool clipped = false;
+  for (int y = 0; y < lum.rows && !clipped; ++y)
+    for (int x = 0; x < lum.cols; ++x)
+      if (!valid.at<uchar>(y, x) && lum.at<float>(y, x) >= 0.5 * peak) {
+        clipped = true;
+        break;
+      }
+  if (!clipped && !(peak > contrast * std::max(quantileOfValid(lum, valid, 0.99), 1e-30))) return light;
   cv::Mat core = (lum >= 0.5 * peak) | ((valid == 0) & (lum > 0.5 * peak));
   cv::Mat labels;
   cv::connectedComponents(core, labels, 8, CV_32S);

@@ -32,8 +32,8 @@ struct HorizonOptions {
   // Rows compared on each side of a candidate horizon, as a fraction of the image height
   // (0, 0.5].
   double band_fraction = 0.25;
-  // The light is in a frame when its brightest pixel (or a clipped pixel) stands this many times
-  // above the frame's median (> 1).
+  // The light is in a frame when it clips, or (unclipped, behind a filter) its brightest pixel
+  // stands this many times above the frame's 99th percentile, its brightest ghosts (> 1).
   double light_contrast = 50;
 
   bool IsValid(std::string* error) const;
