@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -45,7 +46,7 @@ std::vector<model::GhostParameters> ghostsAt(double theta) {
   return {a, b};
 }
 
-void writeCapture(const fs::path& dir, int frames) {
+void writeCapture(const fs::path& dir, int frames, double brightness = 1) {
   const cv::Size size(200, 130);
   fs::create_directories(dir / "frames");
   fs::create_directories(dir / "truth");
@@ -69,7 +70,7 @@ void writeCapture(const fs::path& dir, int frames) {
     cv::Mat clean = cv::Mat::zeros(size, CV_32F);
     for (size_t g = 0; g < ghosts.size(); ++g) {
       std::vector<model::GhostParameters> one = {ghosts[g]};
-      cv::Mat img = model::renderGhosts(one, size, 1);
+      cv::Mat img = model::renderGhosts(one, size, 1) * brightness;
       clean += img;
       truth_ghosts.layers.push_back({"ghost." + std::to_string(g), img});
     }
@@ -375,6 +376,45 @@ TEST(CliFit, BadInputGivesOneLineAndExitTwo) {
                      "--focal-length-mm", "-50"});
     EXPECT_EQ(r.exit_code, 2);
     EXPECT_NE(r.err.find("--focal-length-mm"), std::string::npos) << r.err;
+  }
+  // A frame file that is missing, frames of different sizes, an angle given twice, a frame
+  // without its angle: one line naming the file, exit 2.
+  auto edited = [&](const std::string& name, const std::function<void(const fs::path&, nlohmann::json&)>& edit,
+                    const std::string& expect) {
+    TempDir bad;
+    writeCapture(bad / "capture", 4);
+    auto m = nlohmann::json::parse(std::ifstream(bad / "capture/manifest.json"));
+    edit(bad / "capture", m);
+    std::ofstream(bad / "capture/manifest.json", std::ios::trunc) << m.dump(2);
+    auto e = runFlarekit({"fit", (bad / "capture").string(), "--out", (bad / "m.json").string()});
+    EXPECT_EQ(e.exit_code, 2) << name;
+    EXPECT_EQ(lineCount(e.err), 1) << name << ": " << e.err;
+    EXPECT_NE(e.err.find(expect), std::string::npos) << name << ": " << e.err;
+    EXPECT_FALSE(fs::exists(bad / "m.json")) << name;
+  };
+  edited("missing frame", [](const fs::path& c, nlohmann::json&) { fs::remove(c / "frames/frame_0001.exr"); },
+         "frame_0001.exr");
+  edited("other size", [](const fs::path& c, nlohmann::json&) {
+    ExrAttributes attrs;
+    attrs["flarekit.angle_deg"] = 0.4;
+    writeExr(c / "frames/frame_0002.exr", cv::Mat::zeros(100, 150, CV_32F) + 0.1, attrs);
+  }, "frame_0002.exr");
+  edited("repeated angle", [](const fs::path& c, nlohmann::json& m) {
+    m["frames"][2]["angle_deg"] = 0.2;
+    ExrAttributes attrs;
+    attrs["flarekit.angle_deg"] = 0.2;
+    writeExr(c / "frames/frame_0002.exr", readExrLayer(c / "frames/frame_0002.exr", ""), attrs);
+  }, "0.2");
+  edited("no angle", [](const fs::path&, nlohmann::json& m) { m["frames"][3].erase("angle_deg"); },
+         "angle_deg");
+  // A capture with no ghost in it: an empty model and a clear message, exit 0.
+  {
+    TempDir empty;
+    writeCapture(empty / "capture", 6, 0.0);
+    auto e = runFlarekit({"fit", (empty / "capture").string(), "--out", (empty / "m.json").string()});
+    EXPECT_EQ(e.exit_code, 0) << e.err;
+    EXPECT_NE(e.err.find("No ghost"), std::string::npos) << e.err;
+    EXPECT_TRUE(model::FlareModel::load(empty / "m.json").ghosts.empty());
   }
   // An unknown optimizer.
   r = runFlarekit({"fit", (dir / "capture").string(), "--out", (dir / "m.json").string(),
