@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include <Eigen/Dense>
@@ -150,8 +151,7 @@ int degreeByValidation(const std::vector<double>& angles, const std::vector<doub
     half_angles[i % 2].push_back(angles[i]);
     half_values[i % 2].push_back(values[i]);
   }
-  int best = min_degree;
-  double best_error = std::numeric_limits<double>::infinity();
+  std::vector<double> errors_of(max_degree + 1, std::numeric_limits<double>::infinity());
   for (int degree = min_degree; degree <= max_degree; ++degree) {
     std::vector<double> errors;
     for (int fit = 0; fit < 2; ++fit) {
@@ -161,13 +161,14 @@ int degreeByValidation(const std::vector<double>& angles, const std::vector<doub
       for (size_t i = 0; i < half_angles[other].size(); ++i)
         errors.push_back(std::abs(half_values[other][i] - p.evaluate(half_angles[other][i])));
     }
-    // A higher degree must earn its place: 2 % better than the best so far.
-    const double e = median(errors);
-    if (e < 0.98 * best_error) {
-      best_error = e;
-      best = degree;
-    }
+    errors_of[degree] = median(errors);
   }
+  // The least degree within two standard errors of the best held-out error (the median of n
+  // absolute errors scatters by about 1.25/√n of itself): a higher degree must earn its place.
+  const double best_error = *std::min_element(errors_of.begin() + min_degree, errors_of.end());
+  const double tolerance = 1 + 2.5 / std::sqrt(static_cast<double>(n));
+  int best = min_degree;
+  while (errors_of[best] > tolerance * best_error) ++best;
   return best;
 }
 

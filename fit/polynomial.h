@@ -39,9 +39,9 @@ model::Polynomial robustPolynomial(const std::vector<double>& angles_deg,
                                    double outlier_sigma = 4, double floor = 0,
                                    std::vector<bool>* inliers = nullptr);
 
-// The degree in [min_degree, max_degree] whose robust polynomial predicts held-out points best:
-// fitted on every other point, scored (median absolute error) on the others and the other way
-// round. Fewer than 2 × (max_degree + 2) points lower the largest degree tried.
+// The least degree in [min_degree, max_degree] whose robust polynomial predicts held-out points
+// within two standard errors of the best: fitted on every other point, scored (median absolute error) on the
+// others and the other way round. Fewer than 2 × (max_degree + 2) points lower the largest degree tried.
 int degreeByValidation(const std::vector<double>& angles_deg, const std::vector<double>& values,
                        int min_degree, int max_degree);
 

@@ -1,7 +1,16 @@
 #pragma once
 // Helpers for fit/'s tests (header-only; not part of the library).
 
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "fit/frames.h"
 #include "model/ghost_shape.h"
+#include "model/model_renderer.h"
 
 namespace flarekit::fit::testing {
 
@@ -25,6 +34,73 @@ inline model::GhostParameters ghost(double x, double y, double l, double r, doub
   g.outside_falloff = 3;
   g.outside_exponent = 1.5;
   return g;
+}
+
+// A pan capture in memory, as a rig makes it: the light (a disc that clips) on the horizon at
+// x = axis_x − focal_px·tan(θ − θ0), and ghosts mirror-symmetric about the horizon whose centres
+// are odd about the optical zero, Mx = axis_x + rate·(light's x − axis_x), of fixed size.
+struct PanScene {
+  cv::Size size{320, 200};
+  double axis_x = 160.4, horizon_y = 100.3;  // the optical axis, pixels
+  double angle_zero_deg = 0.3;               // θ0
+  double focal_px = 1000;
+  double light_radius_px = 4;
+  struct Ghost {
+    double rate = 1, radius_px = 20, border = 0.01, inside = 0.005;
+  };
+  std::vector<Ghost> ghosts = {{1.6, 30, 0.02, 0.01}, {-0.8, 45, 0.01, 0.015}};
+  double noise = 1e-4;
+
+  double lightX(double angle_deg) const {
+    return axis_x - focal_px * std::tan((angle_deg - angle_zero_deg) * std::numbers::pi / 180);
+  }
+  model::GhostParameters ghostAt(size_t g, double angle_deg) const {
+    model::GhostParameters p;
+    p.center_x = axis_x + ghosts[g].rate * (lightX(angle_deg) - axis_x);
+    p.center_y = horizon_y;
+    p.left = p.right = p.height = ghosts[g].radius_px;
+    p.border = {ghosts[g].border, 0, 0};
+    p.inside = {ghosts[g].inside, 0, 0};
+    p.inside_falloff = 0.4 * ghosts[g].radius_px;
+    p.outside_falloff = 1.5;
+    return p;
+  }
+  // Frames at `angles_deg`, one channel, with their valid masks (the light's disc clipped).
+  FrameStack stack(const std::vector<double>& angles_deg) const {
+    FrameStack s;
+    s.size = size;
+    s.channels = 1;
+    cv::RNG rng(7);
+    for (size_t i = 0; i < angles_deg.size(); ++i) {
+      Frame f;
+      f.index = static_cast<int>(i);
+      f.angle_deg = angles_deg[i];
+      std::vector<model::GhostParameters> all;
+      for (size_t g = 0; g < ghosts.size(); ++g) all.push_back(ghostAt(g, angles_deg[i]));
+      f.image = model::renderGhosts(all, size, 1);
+      cv::Mat noise_image(size, CV_32F);
+      rng.fill(noise_image, cv::RNG::NORMAL, 0, noise);
+      f.image += noise_image + 2 * noise;
+      f.valid = cv::Mat(size, CV_8U, cv::Scalar(255));
+      const cv::Point2d light(lightX(angles_deg[i]), horizon_y);
+      for (int y = 0; y < size.height; ++y)
+        for (int x = 0; x < size.width; ++x)
+          if (std::hypot(x + 0.5 - light.x, y + 0.5 - light.y) <= light_radius_px) {
+            f.image.at<float>(y, x) = 1;
+            f.valid.at<uchar>(y, x) = 0;
+          }
+      s.frames.push_back(std::move(f));
+    }
+    s.info.image_size = size;
+    s.info.angle_step_deg = angles_deg.size() > 1 ? angles_deg[1] - angles_deg[0] : 1;
+    return s;
+  }
+};
+
+inline std::vector<double> anglesFrom(double first, double last, double step) {
+  std::vector<double> a;
+  for (int i = 0; first + i * step <= last + 1e-9; ++i) a.push_back(first + i * step);
+  return a;
 }
 
 }  // namespace flarekit::fit::testing

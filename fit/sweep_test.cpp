@@ -1,0 +1,81 @@
+// The sweep image, its border traces and the ghosts paired from them, on a pan capture of known
+// ghosts.
+#include "fit/sweep.h"
+
+#include <gtest/gtest.h>
+
+#include "fit/ghost_candidates.h"
+#include "fit/testing.h"
+
+namespace flarekit::fit {
+namespace {
+
+using testing::anglesFrom;
+using testing::PanScene;
+
+TEST(SweepOptions, DefaultsAreValid) {
+  std::string error;
+  EXPECT_TRUE(SweepOptions{}.IsValid(&error)) << error;
+  EXPECT_TRUE(CandidateOptions{}.IsValid(&error)) << error;
+}
+
+TEST(Sweep, EveryBorderIsATraceAtItsPlace) {
+  PanScene scene;
+  const FrameStack stack = scene.stack(anglesFrom(0, 6, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  ASSERT_EQ(sweep.rows(), static_cast<int>(stack.frames.size()));
+  const std::vector<BorderTrace> traces = findTraces(sweep);
+  // Each ghost border inside the frame (away from the light's core) has a trace point within
+  // a pixel, on the right side, in nine frames of ten.
+  for (size_t g = 0; g < scene.ghosts.size(); ++g)
+    for (BorderSide side : {BorderSide::kLeft, BorderSide::kRight}) {
+      int inside = 0, found = 0;
+      for (int row = 0; row < sweep.rows(); ++row) {
+        const auto p = scene.ghostAt(g, sweep.angles_deg[row]);
+        const double x = side == BorderSide::kLeft ? p.center_x - p.left : p.center_x + p.right;
+        if (x < 8 || x > stack.size.width - 8 || std::abs(x - scene.lightX(sweep.angles_deg[row])) < 10) continue;
+        ++inside;
+        for (const auto& t : traces)
+          if (const BorderPoint* q = t.side == side ? t.at(row) : nullptr; q && std::abs(q->x_px - x) < 1) {
+            ++found;
+            break;
+          }
+      }
+      EXPECT_GE(found, 0.9 * inside) << "ghost " << g << (side == BorderSide::kLeft ? " left" : " right");
+    }
+}
+
+TEST(GhostCandidates, PairTheBordersOfEachGhostAndSeedIt) {
+  PanScene scene;
+  const FrameStack stack = scene.stack(anglesFrom(0, 6, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  const std::vector<BorderTrace> traces = findTraces(sweep);
+  CandidateSummary summary;
+  const std::vector<GhostCandidate> candidates = findGhostCandidates(stack, sweep, traces, {}, &summary);
+  // Each true ghost is one candidate, seeded at its borders and height in every frame it is in.
+  for (size_t g = 0; g < scene.ghosts.size(); ++g) {
+    int matched_frames = 0, frames = 0;
+    for (int row = 0; row < sweep.rows(); ++row) {
+      const auto p = scene.ghostAt(g, sweep.angles_deg[row]);
+      if (p.center_x - p.left < 0 || p.center_x + p.right > stack.size.width) continue;
+      ++frames;
+      for (const auto& c : candidates) {
+        if (!c.present(row)) continue;
+        const auto& s = c.seed(row);
+        if (std::abs(s.center_x - s.left - (p.center_x - p.left)) < 1.5 &&
+            std::abs(s.center_x + s.right - (p.center_x + p.right)) < 1.5 &&
+            std::abs(s.height - p.height) < 0.15 * p.height) {
+          ++matched_frames;
+          break;
+        }
+      }
+    }
+    EXPECT_GE(matched_frames, 0.9 * frames) << "ghost " << g << " of " << frames << " frames";
+  }
+  EXPECT_GE(summary.pairs, 2);
+}
+
+}  // namespace
+}  // namespace flarekit::fit
