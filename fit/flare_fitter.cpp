@@ -125,6 +125,17 @@ FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
   sum.optical_zero = measureOpticalZero(stack, result.horizon,
                                         centreSamples(result.candidates, result.traces, result.sweep),
                                         options.optical_zero);
+  // Where the light's core is cut by the frame's edge, or lies just beyond it, its halo and
+  // starburst are still in the frame: the light's curve says where it is.
+  if (!sum.optical_zero.light_coefficients.empty())
+    for (size_t i = 0; i < stack.frames.size(); ++i) {
+      LightImage& light = result.horizon.lights[i];
+      const double x = sum.optical_zero.lightX(stack.frames[i].angle_deg);
+      const bool cut = !light.found || light.center.x < 2 * light.core_radius_px ||
+                       light.center.x > stack.size.width - 2 * light.core_radius_px;
+      if (cut && x > -result.light.radius_px && x < stack.size.width + result.light.radius_px)
+        light = {true, {x, result.horizon.y_px}, light.core_radius_px};
+    }
   sum.seconds_candidates = since(t);
   if (result.candidates.empty())
     sum.warnings.push_back("No ghost was found in the capture: the model is empty.");

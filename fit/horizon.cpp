@@ -388,8 +388,9 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
   };
   if (d.ghosts.empty()) {
     // Nothing tells θ0 from the axis's x: θ0 = 0, the axis where the light's curve is there.
-    fitAtZero(d, 0, light_terms, 1, 1, weights, &zero, nullptr, nullptr);
-    zero.light_rms_px = 0;
+    std::vector<double> light_res;
+    fitAtZero(d, 0, light_terms, 1, 1, weights, &zero, &light_res, nullptr);
+    zero.light_rms_px = rmsOf(light_res);
     return zero;
   }
   double theta0 = 0;
