@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 
+#include "common/image.h"
 #include "common/progress.h"
 #include "fit/shade.h"
 #include "model/model_renderer.h"
@@ -69,14 +70,27 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const LightImage& light
   // the others and the pedestal held, then the shades together again.
   model::Pedestal* pedestal = o.pedestal ? &fit.pedestal : nullptr;
   fitShades(frame.image, frame.valid, fit.noise_sigma, fit.ghosts, pedestal, o.shade);
+  // Outlines are fitted to the luminance (one shape per ghost, whatever the channels): the
+  // shades per channel then come from the linear solve.
+  auto grey = [](const model::GhostParameters& g) {
+    model::GhostParameters one = g;
+    one.channels = 1;
+    if (g.channels == 3) {
+      one.border = {0.2126 * g.border[0] + 0.7152 * g.border[1] + 0.0722 * g.border[2], 0, 0};
+      one.inside = {0.2126 * g.inside[0] + 0.7152 * g.inside[1] + 0.0722 * g.inside[2], 0, 0};
+    }
+    return one;
+  };
   for (int sweep = 0; sweep < o.sweeps; ++sweep) {
-    const cv::Mat target = frame.image - fit.pedestal.image(stack.size);
+    const cv::Mat target = luminance(frame.image - fit.pedestal.image(stack.size));
     FramePyramid pyramid(target, frame.valid, edge, fit.noise_sigma);
     fit.cost = 0;
+    std::vector<model::GhostParameters> shapes;
+    for (const auto& g : fit.ghosts) shapes.push_back(grey(g));
     for (size_t i : order) {
       std::vector<model::GhostParameters> others;
-      for (size_t j = 0; j < fit.ghosts.size(); ++j)
-        if (j != i) others.push_back(fit.ghosts[j]);
+      for (size_t j = 0; j < shapes.size(); ++j)
+        if (j != i) others.push_back(shapes[j]);
       // The borders the sweep saw in the frame are known to a pixel or two; the rest of the
       // outline (beyond the frame, in the light) only roughly.
       const model::GhostParameters& seed = seeds[i];
@@ -86,9 +100,17 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const LightImage& light
       };
       const std::array<double, 6> sigmas = {border(seed.center_x - seed.left), border(seed.center_x + seed.right), 1.0,
                                             o.unseen_sigma_fraction * seed.height, 0.3, 0.3};
-      GroupCost cost(pyramid, edge, others, std::span(&fit.ghosts[i], 1), o.cost, std::span(&sigmas, 1));
-      const GroupFitResult r = solveGroup(cost, std::span(&fit.ghosts[i], 1), o.solver);
-      fit.ghosts[i] = r.ghosts[0];
+      GroupCost cost(pyramid, edge, others, std::span(&shapes[i], 1), o.cost, std::span(&sigmas, 1));
+      const GroupFitResult r = solveGroup(cost, std::span(&shapes[i], 1), o.solver);
+      shapes[i] = r.ghosts[0];
+      // The fitted outline and fall-offs; the shades stay the frame's until solved again.
+      model::GhostParameters& g = fit.ghosts[i];
+      const auto border_colour = g.border, inside_colour = g.inside;
+      const int channels = g.channels;
+      g = shapes[i];
+      g.channels = channels;
+      g.border = border_colour;
+      g.inside = inside_colour;
       fit.cost += r.final_cost;
       fit.evaluations += r.evaluations;
       fit.iterations += r.iterations;

@@ -6,7 +6,8 @@
 // Per frame, the shades of all ghosts present and the frame's pedestal (model/pedestal.h, the glow
 // of veils with no border in the frame) are solved together (fit/shade.h); then each ghost is
 // fitted in turn, largest first, on its own region and level (fit/cost.h) with the others and the
-// pedestal held (Gauss–Seidel), and the shades solved together again, in `sweeps` passes.
+// pedestal held (Gauss–Seidel), and the shades solved together again, in `sweeps` passes. The
+// outlines are fitted to the luminance, the shades per channel: one shape per ghost.
 // My is held on the horizon: every ghost is symmetric about it. A shape prior holds each outline
 // near its seed: tightly where the sweep saw the border, loosely elsewhere. Frames are independent and fitted
 // in parallel; each one's result does not depend on the thread count.
@@ -28,7 +29,7 @@ namespace flarekit::fit {
 struct FrameFitOptions {
   CostOptions cost;                  // the cost: MSE + λ edge, per-pixel Cauchy loss, levels
   SolverOptions solver;              // Ceres Levenberg–Marquardt (or the paper's GD)
-  int sweeps = 2;                    // passes over a frame's ghosts (≥ 1)
+  int sweeps = 1;                    // passes over a frame's ghosts (≥ 1)
   bool pedestal = true;              // fit each frame's pedestal
   ShadeOptions shade;                // the shades and the pedestal by linear least squares
   // The shape prior about each ghost's seed: σ of a border the sweep saw in the frame, pixels,
