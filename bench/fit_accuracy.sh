@@ -1,28 +1,31 @@
 #!/usr/bin/env bash
-# The fit's acceptance figures (issue 6) on the simulated 640×427 captures, and their spread.
+# The fit's acceptance figures (issue 8, docs/fitting.md) on the simulated 640×427 captures, and
+# their spread.
 #
-# For each lens (tests/data/fit/sim-<lens>-640.toml, 0–30° at 0.2°, simulated on first use) and
-# each edge weight λ, fits the capture with a report, then rates the model and the report's
-# per-frame fits against the ground truth with fit-eval. Prints one line per fit and, per lens,
-# the mean and the range over the λ of recall / precision / median PSNR / median centroid error
-# (px, and % of the ghost's radius) / median flux error / continuity.
+# For each lens (tests/data/fit/sim-<lens>-640.toml, 0–30° at 0.2°, simulated on first use), each
+# noise seed (the rig's [sensor] seed) and each edge weight λ, fits the capture with a report,
+# then rates the model and the report's per-frame fits against the ground truth with fit-eval.
+# Prints one line per fit and, per lens, the mean and the range over λ × seeds of recall /
+# precision / median PSNR / median centroid error (px, and % of the ghost's radius) / median flux
+# error / continuity, and the fit's seconds.
 #
-# Why several λ: the fitter's discrete decisions (a detection kept or not, a track ended a frame
-# sooner) amplify small changes, and λ × 0.99 against λ × 1.01 moves one lens's recall by 10
-# points or more. One fit cannot tell a change from that spread; the mean over λ, set against its
-# range, can tell only changes larger than it.
+# Why several λ and seeds: a fit's figures move with small changes of its input; one fit cannot
+# tell a change from that spread, the mean set against its range can tell changes larger than it.
 #
-#   bench/fit_accuracy.sh [--lenses "heliar tessar"] [--lambdas "0.99 1 1.01"] [--holdout]
-#                         [--out DIR] [--flarekit BIN] [--eval-only] [-- more flarekit fit options]
+#   bench/fit_accuracy.sh [--lenses "heliar tessar tessar-rggb nikon"] [--seeds "1 2 3"]
+#                         [--lambdas "0.98 0.99 1 1.01 1.02"] [--holdout] [--out DIR]
+#                         [--flarekit BIN] [--eval-only] [-- more flarekit fit options]
 #
 # --eval-only rates the fits already in DIR again (after a change to fit-eval) without fitting.
 # --holdout fits every other frame (fit --holdout odd) and rates the model on the frames it left
-# out (fit-eval --frames odd). A fit takes 1–2 min on 2 cores. Needs jq.
+# out (fit-eval --frames odd). Captures are kept in DIR/captures/<lens>-640-s<seed>: simulating
+# one takes 3–20 min, a fit 0.5–10 min on 2 cores. Needs jq.
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-lenses="heliar tessar"
-lambdas="0.99 1 1.01"
+lenses="heliar tessar tessar-rggb nikon"
+seeds="1 2 3"
+lambdas="0.98 0.99 1 1.01 1.02"
 out=${TMPDIR:-/tmp}/flarekit-fit-accuracy
 flarekit=$here/build/bin/flarekit
 holdout=0
@@ -31,6 +34,7 @@ while (($#)); do
   case $1 in
     --lenses) lenses=$2; shift 2 ;;
     --lambdas) lambdas=$2; shift 2 ;;
+    --seeds) seeds=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --flarekit) flarekit=$2; shift 2 ;;
     --holdout) holdout=1; shift ;;
@@ -57,47 +61,55 @@ figures() {
 echo "recall % / precision % / median PSNR dB / median centroid error px / median centroid error %" \
   "of radius / median flux error % / continuity (fit-eval against the truth)"
 for lens in $lenses; do
-  capture=$out/captures/$lens-640
-  if [[ ! -f $capture/manifest.json ]]; then
-    echo "simulating $capture"
-    "$flarekit" -q capture --rig "$here/tests/data/fit/sim-$lens-640.toml" --out "$capture" --from 0 --to 30 --step 0.2
-  fi
   rows=()
-  for lambda in $lambdas; do
-    run=$out/$lens-$lambda
-    ((holdout)) && run+=-holdout
-    mkdir -p "$run"
-    args=("$capture" --edge-weight "$lambda" --out "$run/model.json" --report "$run/report")
-    ((holdout)) && args+=(--holdout odd)
-    ((eval_only)) || "$flarekit" -q fit "${args[@]}" "$@"
-    "$flarekit" -q fit-eval "$run/model.json" "$capture" "${eval_args[@]}" --json >"$run/eval_model.json"
-    line="$(figures "$run/eval_model.json")"
-    if ((!holdout)); then
-      "$flarekit" -q fit-eval "$run/report/frame_fits.json" "$capture" --json >"$run/eval_frames.json"
-      line+=$'\t'"$(figures "$run/eval_frames.json")"
+  for seed in $seeds; do
+    capture=$out/captures/$lens-640-s$seed
+    if [[ ! -f $capture/manifest.json ]] || ! jq -e '.status == "complete"' "$capture/manifest.json" >/dev/null; then
+      echo "simulating $capture"
+      mkdir -p "$out/captures"
+      rig=$out/captures/sim-$lens-640-s$seed.toml
+      sed "s/^seed = .*/seed = $seed/" "$here/tests/data/fit/sim-$lens-640.toml" >"$rig"
+      resume=()
+      [[ -d $capture ]] && resume=(--resume)
+      "$flarekit" -q capture --rig "$rig" --out "$capture" --from 0 --to 30 --step 0.2 "${resume[@]}"
     fi
-    seconds=$(jq -r '.seconds_total | . * 10 | round / 10' "$run/report/summary.json")
-    awk -v head="$lens λ×$lambda" -v seconds="$seconds" -v m="$columns" '
-      function part(from,    k, t) {
-        for (k = 0; k < m; ++k) t = t (k ? "/" : "") ($(from + k) == "nan" ? "–" : sprintf(k == m - 1 ? "%.2f" : "%.1f", $(from + k)))
-        return t
-      }
-      {
-        printf "%s: model %s", head, part(1)
-        if (NF > m) printf ", frame fits %s", part(m + 1)
-        printf ", %s s\n", seconds
-      }' <<<"$line"
-    rows+=("$line")
+    for lambda in $lambdas; do
+      run=$out/$lens-s$seed-$lambda
+      ((holdout)) && run+=-holdout
+      mkdir -p "$run"
+      args=("$capture" --edge-weight "$lambda" --out "$run/model.json" --report "$run/report")
+      ((holdout)) && args+=(--holdout odd)
+      ((eval_only)) || "$flarekit" -q fit "${args[@]}" "$@"
+      "$flarekit" -q fit-eval "$run/model.json" "$capture" "${eval_args[@]}" --json >"$run/eval_model.json"
+      line="$(figures "$run/eval_model.json")"
+      if ((!holdout)); then
+        "$flarekit" -q fit-eval "$run/report/frame_fits.json" "$capture" --json >"$run/eval_frames.json"
+        line+=$'\t'"$(figures "$run/eval_frames.json")"
+      fi
+      seconds=$(jq -r '.seconds_total | . * 10 | round / 10' "$run/report/summary.json")
+      awk -v head="$lens seed $seed λ×$lambda" -v seconds="$seconds" -v m="$columns" '
+        function part(from,    k, t) {
+          for (k = 0; k < m; ++k) t = t (k ? "/" : "") ($(from + k) == "nan" ? "–" : sprintf(k == m - 1 ? "%.2f" : "%.1f", $(from + k)))
+          return t
+        }
+        {
+          printf "%s: model %s", head, part(1)
+          if (NF > m) printf ", frame fits %s", part(m + 1)
+          printf ", %s s\n", seconds
+        }' <<<"$line"
+      rows+=("$line"$'\t'"$seconds")
+    done
   done
-  # Mean and range over the λ of each column (model; then the frames' own fits), over the fits
-  # that have a value there.
-  printf '%s\n' "${rows[@]}" | awk -v lens="$lens" -v n="$(wc -w <<<"$lambdas")" -v m="$columns" '
+  # Mean and range over λ × seeds of each column (model; then the frames' own fits), over the fits
+  # that have a value there; the last column is the fit's seconds.
+  printf '%s\n' "${rows[@]}" | awk -v lens="$lens" -v n="$(($(wc -w <<<"$lambdas") * $(wc -w <<<"$seeds")))" -v m="$columns" '
     { for (i = 1; i <= NF; ++i) if ($i != "nan") {
-        s[i] += $i; ++c[i]; if (!(i in lo) || $i < lo[i]) lo[i] = $i; if (!(i in hi) || $i > hi[i]) hi[i] = $i } }
+        s[i] += $i; ++c[i]; if (!(i in lo) || $i < lo[i]) lo[i] = $i; if (!(i in hi) || $i > hi[i]) hi[i] = $i }
+      nf = NF }
     END {
       split("recall % | precision % | PSNR dB | centroid px | centroid % | flux error % | continuity", name, " [|] ")
-      for (part = 0; part * m < NF; ++part) {
-        printf "%s mean over %d λ, %s: ", lens, n, part == 0 ? "model" : "frame fits"
+      for (part = 0; part * m < nf - 1; ++part) {
+        printf "%s mean over %d fits (λ × seeds), %s: ", lens, n, part == 0 ? "model" : "frame fits"
         for (k = 1; k <= m; ++k) {
           i = part * m + k; f = k == m ? "%.2f" : "%.1f"
           if (c[i]) printf "%s " f " (" f "–" f ")", name[k], s[i] / c[i], lo[i], hi[i]
@@ -105,5 +117,6 @@ for lens in $lenses; do
           printf(k < m ? ", " : "\n")
         }
       }
+      printf "%s seconds per fit: %.1f (%.1f–%.1f)\n", lens, s[nf] / c[nf], lo[nf], hi[nf]
     }'
 done

@@ -160,6 +160,23 @@ std::vector<double> borderAt(const BorderTrace& t, const SweepImage& s, int firs
   return out;
 }
 
+// Whether `t` keeps its distance to the light: over the rows where the light is found (at least
+// half of the trace's), its offset from the light changes by less than `min_motion` of the
+// light's own motion.
+bool followsTheLight(const SweepImage& s, const BorderTrace& t, double min_motion) {
+  std::vector<double> light, offset;
+  for (const auto& p : t.points)
+    if (std::isfinite(s.light_x_px[p.row])) {
+      light.push_back(s.light_x_px[p.row]);
+      offset.push_back(p.x_px - s.light_x_px[p.row]);
+    }
+  if (light.size() < 3 || 2 * light.size() < t.points.size()) return false;
+  const auto [lo, hi] = std::minmax_element(light.begin(), light.end());
+  if (*hi - *lo < 1) return false;
+  const model::Polynomial line = leastSquaresPolynomial(light, offset, 1);
+  return line.coefficients.size() > 1 && std::abs(line.coefficients[1]) < min_motion;
+}
+
 // The light's curve x(θ) as a cubic in tan θ (the light images at f·tan θ, with distortion),
 // through the frames that show it; empty when fewer than four do.
 std::optional<model::Polynomial> lightCurve(const SweepImage& s) {
@@ -239,6 +256,7 @@ bool CandidateOptions::IsValid(std::string* error) const {
   if (!(max_step_ratio > 1)) return fail("candidates: max_step_ratio must be > 1");
   if (!(max_width_change_per_deg > 0)) return fail("candidates: max_width_change_per_deg must be > 0");
   if (!(max_centre_rms_px > 0)) return fail("candidates: max_centre_rms_px must be > 0");
+  if (!(min_motion_from_light >= 0)) return fail("candidates: min_motion_from_light must be ≥ 0");
   if (!(single_significance > 0)) return fail("candidates: single_significance must be > 0");
   if (!(single_raised_fraction > 0 && single_raised_fraction <= 1))
     return fail("candidates: single_raised_fraction must be in (0, 1]");
@@ -263,11 +281,13 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
     std::vector<double> angles, centres;  // the shared frames' centres (x_L + x_R) / 2
     double width = 0;                     // mean half-width over them
   };
+  std::vector<bool> light_edge(traces.size(), false);
+  for (const auto& t : traces) light_edge[t.id] = followsTheLight(s, t, o.min_motion_from_light);
   std::vector<Pair> pairs;
   for (const auto& l : traces) {
-    if (l.side != BorderSide::kLeft) continue;
+    if (l.side != BorderSide::kLeft || light_edge[l.id]) continue;
     for (const auto& r : traces) {
-      if (r.side != BorderSide::kRight) continue;
+      if (r.side != BorderSide::kRight || light_edge[r.id]) continue;
       if (r.lastRow() < l.firstRow() || l.lastRow() < r.firstRow()) continue;
       std::vector<double> ratios, angles, widths;
       bool crossed = false;
@@ -313,7 +333,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
   sum.pairs = static_cast<int>(ghosts.size());
   for (const auto& t : traces) {
     if (used[t.id]) continue;
-    if (t.significance >= o.single_significance && raisedToHidden(s, t, o.single_raised_fraction)) {
+    if (!light_edge[t.id] && t.significance >= o.single_significance && raisedToHidden(s, t, o.single_raised_fraction)) {
       ghosts.push_back(t.side == BorderSide::kLeft ? Borders{t.id, -1} : Borders{-1, t.id});
       ++sum.single;
     } else {

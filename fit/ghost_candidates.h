@@ -11,6 +11,10 @@
 // ghost's, an odd function about the optical zero (fit/horizon.h): pairs of two unrelated borders,
 // or of a border and a rim's inner edge, are centred elsewhere.
 //
+// A trace that keeps its distance to the light while the light moves is the edge of the light's
+// own image (its glow, a starburst spike), never a ghost's: only a ghost focused on the sensor
+// moves with the light, and it is drawn on the light's core.
+//
 // A trace left over is a ghost whose other border is hidden (beyond the frame, or in the light's
 // zone) when S stays raised by its step from the trace to there on the ghost's side (a large ghost
 // at some angles, a ghost about the light); otherwise it is an edge inside a ghost (a caustic's
@@ -37,6 +41,8 @@ struct CandidateOptions {
   double max_step_ratio = 2.5;      // their steps differ by at most this factor (> 1)
   double max_width_change_per_deg = 0.15;  // their distance changes by at most this fraction a degree
   double max_centre_rms_px = 2;     // their middle's distance from an odd curve about the zero
+  double min_motion_from_light = 0.05;  // a border moves, relative to the light, at least this
+                                        // fraction of the light's own motion (≥ 0)
   double single_significance = 20;  // a lone trace's significance to stand for a ghost (> 0)
   double single_raised_fraction = 0.5;  // S stays this fraction of its step above the outside
   int max_hidden_rows = 30;         // a ghost goes on this many frames beyond its traces when hidden

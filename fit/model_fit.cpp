@@ -202,14 +202,8 @@ class ModelResidual : public ceres::CostFunction {
   const ModelEquations& equations_;
 };
 
-// The least level k whose frame of size/k fits within `pixels`.
-int levelWithin(cv::Size size, int pixels) {
-  return std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(size.area()) / pixels))));
-}
-
-
-// `p` as a polynomial that stays within bounds `b` over [lo, hi] (where the model file is checked): where it strays, the least-squares polynomial through its values clamped to
-// the bounds, of the highest degree that stays within them.
+// `p` as a polynomial that stays within bounds `b` over [lo, hi] (where the model file is
+// checked): where it strays, the least-squares polynomial through its values clamped to the bounds, of the highest degree that stays within them.
 model::Polynomial withinBounds(const ScaledPolynomial& p, const model::ParameterBounds& b, double lo, double hi) {
   constexpr int kChecks = 129;
   auto inside = [&](const model::Polynomial& q) {
