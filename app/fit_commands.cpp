@@ -254,8 +254,8 @@ void registerFitCeiling(CLI::App& app) {
   cmd->add_option("--edge-weight", o->edge_weight, "λ of the first stage of each fit (default 1, as fit)");
   cmd->add_option("--fit-above", o->fit_above,
                   "Fit only the true ghosts whose peak exceeds this many noise σ, the rest drawn as one flat "
-                  "pedestal (the fitter's glare): what a fitter that finds every ghost above that level could "
-                  "reach (default 0: every ghost)");
+                  "pedestal: what a fitter that finds every ghost above that level could reach (default 0: "
+                  "every ghost)");
   cmd->add_flag("--quadratic-pedestal", o->quadratic_pedestal,
                 "With --fit-above: the pedestal a quadratic in x and y over the frame instead of flat");
   cmd->add_option("--sheets", o->sheets,

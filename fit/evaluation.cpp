@@ -147,10 +147,6 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
   std::vector<cv::Mat> model_images;  // each blob's luminance over model_boxes
   std::vector<cv::Rect> model_boxes;
   for (const auto& g : ghosts) {
-    if (isGlare(g.parameters, stack.size)) {
-      ++fe.glare_ghosts;
-      continue;
-    }
     const cv::Rect box = model::ghostPixelBounds(g.parameters) & image;
     if (box.empty()) continue;
     std::vector<model::GhostParameters> one = {g.parameters};
@@ -320,8 +316,7 @@ bool EvaluationOptions::IsValid(std::string* error) const {
 double medianOf(std::vector<double> v) {
   v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }), v.end());
   if (v.empty()) return kNaN;
-  // Selection, not a sort: the fitter takes the median of every candidate blob's pixels (a
-  // frame-filling glare's are 10⁵), and sorting them was 2 % of a capture fit's time.
+  // Selection, not a sort: linear in the number of values.
   const size_t n = v.size(), middle = n / 2;
   std::nth_element(v.begin(), v.begin() + middle, v.end());
   if (n % 2) return v[middle];
@@ -401,7 +396,6 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
     ev.true_ghosts_found += fe->true_ghosts_found;
     ev.model_ghosts += fe->model_ghosts;
     ev.model_ghosts_matched += fe->model_ghosts_matched;
-    ev.glare_ghosts += fe->glare_ghosts;
     ev.model_ghosts_pieces += fe->model_ghosts_pieces;
     ev.light_ghosts += fe->light_ghosts;
     ev.frames.push_back(std::move(*fe));
@@ -539,7 +533,6 @@ nlohmann::json Evaluation::toJson() const {
   j["true_ghosts_found"] = true_ghosts_found;
   j["model_ghosts"] = model_ghosts;
   j["model_ghosts_matched"] = model_ghosts_matched;
-  j["glare_ghosts"] = glare_ghosts;
   j["model_ghosts_pieces"] = model_ghosts_pieces;
   j["light_ghosts"] = light_ghosts;
   nlohmann::json fs = nlohmann::json::array();
@@ -553,7 +546,6 @@ nlohmann::json Evaluation::toJson() const {
                   {"true_ghosts_found", f.true_ghosts_found},
                   {"model_ghosts", f.model_ghosts},
                   {"model_ghosts_matched", f.model_ghosts_matched},
-                  {"glare_ghosts", f.glare_ghosts},
                   {"median_centroid_error_px", number(f.medianCentroidErrorPx())},
                   {"median_centroid_error_pct", number(f.medianCentroidErrorPct())},
                   {"median_flux_error", number(f.medianFluxError())},
@@ -599,8 +591,7 @@ std::string Evaluation::BriefReport() const {
       << " %, median PSNR over each ghost's support " << median_ghost_psnr_db << " dB, recall "
       << 100 * recall << " % (" << true_ghosts_found << "/" << true_ghosts_visible
       << "), continuity " << continuity << ", precision " << 100 * precision << " % ("
-      << model_ghosts_matched << "/" << model_ghosts << ", glare not counted: " << glare_ghosts
-      << " in all frames); ";
+      << model_ghosts_matched << "/" << model_ghosts << "); ";
   s << "median PSNR vs capture " << median_capture_psnr_db << " dB.";
   // The ghosts missed most, up to three.
   std::vector<TrueGhostSummary> missed;
@@ -771,9 +762,9 @@ CeilingFrame ceilingOfFrame(const Frame& f, const CeilingOptions& options) {
     cf.ghosts.push_back(std::move(cg));
   }
   const cv::Mat flare_region = (truth.flare > truth.noise_sigma) & (f.valid > 0);
-  // The ghosts left out sum to a pedestal, which the fitter draws as its flat glare (fit/cost.h
-  // isGlare): drawn here as the constant that comes closest to what they leave, in least squares
-  // over the flare region, their mean there.
+  // The ghosts left out sum to a glow, which the fitter draws as the frame's pedestal
+  // (model/pedestal.h): drawn here as the constant that comes closest to what they leave, in least
+  // squares over the flare region (their mean there), or the quadratic that does.
   if (options.fit_factor > 0 && cv::countNonZero(flare_region) > 0) {
     const cv::Mat rest = truth.flare - described;
     if (options.quadratic_pedestal) {

@@ -61,9 +61,7 @@ double since(Clock::time_point t0) {
 // Each seed's fit bounds (fit/cost.h fitBounds), in the seeds' order.
 using GroupBounds = std::vector<std::vector<model::ParameterBounds>>;
 GroupBounds boundsOf(const GroupCost& cost, std::span<const model::GhostParameters> seeds) {
-  GroupBounds bounds;
-  for (const auto& s : seeds) bounds.push_back(fitBounds(cost, s));
-  return bounds;
+  return GroupBounds(seeds.size(), fitBounds(cost));
 }
 
 // The seeds as parameter blocks, within their bounds.
