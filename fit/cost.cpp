@@ -252,12 +252,7 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
     data_peak = std::max(data_peak, peak);
   }
   // A ghost may be up to 20× brighter than the region's brightest valid pixel: its peak may lie
-  // where no pixel is valid. Beside the light's zone that lets a fit put much light where nothing
-  // checks it (Heliar 640×427 λ × 0.99, track 35 at 9–9.8°: Ii 0.09, the fits' PSNR −14 dB).
-  // 4× instead, over λ × 0.98–1.02 (model recall % / precision % / median PSNR dB / median
-  // centroid error px): Heliar 72.5 / 82.2 / 25.3 / 7.2 → 73.4 / 81.3 / 24.3 / 6.6, Tessar
-  // 75.9 / 59.4 / 27.2 / 10.8 → 73.6 / 60.8 / 27.0 / 11.9. Heliar frames whose fits fall below
-  // 15 dB, per λ: 1, 14, 1, 10, 7 → 8, 2, 8, 0, 5: they moved, they did not go.
+  // where no pixel is valid (cost.h intensityLimit).
   intensity_limit_ = 20 * std::max({data_peak, 3 * frame.noise_sigma, 1e-12});
 
   if (!prior_sigmas.empty())
@@ -337,13 +332,9 @@ void GroupCost::evaluateImages(std::span<const model::GhostParameters> input, bo
   render.parallel = true;
   // Tiles of 32 px, not the renderer's 64: a region holds about max_pixels samples at its level
   // (12000: 110 × 110 px), which 64-px tiles cut into four tasks or fewer for two threads, one of
-  // them idle where a ghost covers only part of the region. Heliar 640×427, λ × 0.99 / 1 / 1.01:
-  // fitted in 52–59 s instead of 63–69 s; Tessar in 60–61 s instead of 60–75 s. Tiles move where
-  // the nearest-point search starts along a row, so the fits differ at the level of its tolerance,
-  // and the capture fit is chaotic at that level: mean recall 75.4 → 71.2 % (Heliar) and
-  // 54.4 → 51.4 % (Tessar), PSNR 24.1 → 24.0 and 23.3 → 22.5 dB, centroid error 9.4 → 8.8 and
-  // 11.1 → 15.6 px; 16-px tiles (56 and 58 s) gave 70.9 and 49.4 %, 21.8 and 22.5 dB, 10.9 and
-  // 12.5 px.
+  // them idle where a ghost covers only part of the region. The tiles decide where the
+  // nearest-point search starts along a row, so changing their size changes the fits at the level
+  // of that search's tolerance.
   render.tile_size = 32;
   model::RenderedGhosts rendered;
   if (jacobians)

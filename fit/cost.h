@@ -21,9 +21,8 @@
 // percentile of the frame over the region would be ruled by exactly those.)
 //
 // ρ is Cauchy's loss ρ(u) = b·ln(1 + u/b), b = loss_scale², applied per pixel
-// (shared/FITTING_NOTES.md: per-pixel blocks with Cauchy 0.2 cut the bias from an unmodelled
-// bright blob from 0.74 px to 0.13 px): what the model does not explain (the light's halo and
-// starburst, neighbours, noise) then pulls on the fit with bounded force.
+// (shared/FITTING_NOTES.md): what the model does not explain (the light's halo and starburst,
+// neighbours, noise) then pulls on the fit with bounded force.
 //
 // Masks: pixels that are saturated or non-finite in the frame carry no data residual; edge
 // residuals within the filter's radius of such a pixel are left out too (E∗X is wrong there).
@@ -38,17 +37,10 @@
 // and an edge's position is unbiased by symmetry.
 //
 // Shape prior (ours): ½ Σ_k ((p_k − s_k)/σ_k)² over the outline's left and right points
-// (Mx − L, Mx + R), its axis My, height h and curvatures Cl, Cr of every ghost, s its seed (in tracking, the extrapolation from the neighbouring frames).
+// (Mx − L, Mx + R), its axis My, height h and curvatures Cl, Cr of every ghost, s its seed.
 // Where the frame shows a parameter, the data's thousands of residuals outweigh it; where it does
 // not (the part of a ghost beyond the frame's edge, the far side of a ghost cut by the light's
-// clipped core) it keeps the parameter where the track says instead of letting it drift to a
-// bound: measured on the Heliar capture, a ghost cropped by the frame had its unseen R run from
-// 218 px to 714 px over two frames without it. A tighter prior on the unseen parts only (σ × 0.1
-// for an outline point beyond the frame's edge, and for h when both its ends are) held the large
-// veils' sides no better where it counts: on the 640×427 captures over λ × 0.98–1.02 (recall % /
-// precision % / median PSNR dB / median centroid error px, bench/fit_accuracy.sh), Heliar
-// 77.6 / 84.1 / 24.2 / 6.6 against 77.2 / 87.0 / 25.4 / 8.0, Tessar 84.2 / 71.1 / 25.2 / 10.0
-// against 82.9 / 72.5 / 25.2 / 10.9.
+// clipped core) it keeps the parameter near its seed instead of letting it drift to a bound.
 //
 // Derivatives: the model is linear in nothing but Ib, Ii, yet every parameter's derivative image
 // is analytic (model/'s renderer, envelope theorem at the fixed nearest point); E is linear, so
@@ -114,8 +106,8 @@ struct FrameData {
                         int factor = 1);
 };
 
-// A frame at every level a cost asks for (built on demand; thread-safe: the capture fitter builds
-// the costs of a frame's ghost groups concurrently).
+// A frame at every level a cost asks for (built on demand; thread-safe, so that costs built on
+// several threads may share one).
 class FramePyramid {
  public:
   // `noise_sigma` ≥ 0: the frame's noise σ at full resolution, σ/k at level k (k×k averages of
@@ -146,8 +138,7 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 // The noise σ of the pixels: 1.4826 / √2 × the median absolute difference of horizontal
 // neighbours (mean over channels), over every row. Ghosts, veils and the light's fall-off change
 // little from one pixel to the next, and their edges are too few to move the median, so a frame
-// full of veils does not inflate it: on the Heliar 640×427 capture, 0–28°, it was within 10 % of
-// the σ of frame − noise-free radiance, where estimateNoiseSigma was 2–9.5× that.
+// full of veils does not inflate it.
 double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 
 // The cost of one group of ghosts (those that overlap, fitted jointly) in one frame. Holds the
@@ -173,9 +164,9 @@ class GroupCost {
   const model::ViewTransform& view() const { return view_; }
   double scale() const { return scale_; }
   // The largest intensity a ghost of this group may take: 20× the brightest valid pixel of the
-  // region (at least 3 noise σ). Not the seeds' peak: where a ghost's deep inside lies beyond the
-  // frame its Ii is barely seen, and a bound that follows the seed let it grow 20× per frame of a
-  // track (Heliar ghost 21: Ii from 3e-4 to 47 over 1.2°, the model's disc white in every view).
+  // region (at least 3 noise σ), since its peak may lie where no pixel is valid. Taken from the
+  // data, not the seeds: where a ghost's deep inside lies beyond the frame its Ii is barely seen,
+  // and nothing else keeps it from growing.
   double intensityLimit() const { return intensity_limit_; }
   double lossScale() const { return options_.loss_scale; }
   // The capture's size (full resolution).
@@ -189,8 +180,7 @@ class GroupCost {
   double evaluate(std::span<const model::GhostParameters> ghosts, bool jacobians);
   // Evaluates from flat parameter vectors (one per ghost).
   double evaluate(const std::vector<const double*>& parameters, bool jacobians);
-  // As evaluate(), without summing the cost: for Ceres, which sums its residual blocks itself (the
-  // sum, a log1p per sample, was 2.5 % of a capture fit's CPU time, thrown away).
+  // As evaluate(), without summing the cost: for Ceres, which sums its residual blocks itself.
   void prepare(const std::vector<const double*>& parameters, bool jacobians);
   // Number of evaluate() calls so far (cost evaluations, with or without derivatives).
   long long evaluations() const { return evaluations_; }
