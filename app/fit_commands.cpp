@@ -299,7 +299,7 @@ void registerBenchFit(CLI::App& app) {
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder, or EXR files / folders")->required();
   cmd->add_flag("--json", o->json, "Print one JSON object (always JSON; accepted for symmetry)");
   cmd->add_option("--frames", o->frames, "Frames sampled evenly (default 3)");
-  cmd->add_option("--seeds", o->seeds, "Starts per frame: the brightest detections (default 1)");
+  cmd->add_option("--seeds", o->seeds, "Starts per frame: the brightest ghost candidates present (default 1)");
   cmd->add_option("--gd-iterations", o->gd_iterations, "Gradient-descent iterations per start (default 200)");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   addStackOptions(cmd, o->stack);

@@ -38,8 +38,8 @@ struct Blob {
 // Intensity-weighted centroid, peak and radius of a luminance image placed at `offset` in the
 // frame. The radius is √2 × the intensity-weighted RMS distance from the centroid: exactly R for a
 // uniform disc of radius R, and, unlike an area above a fraction of the peak, not shrunk to a few
-// pixels by a caustic's bright spike on a large ghost (Heliar ghost 21: 7.7 px by the area above
-// 10 % of its peak, for a disc ~200 px across), which made its match gate 3 px.
+// pixels by a caustic's bright spike on a large ghost, which would shrink its match gate to the
+// smallest.
 Blob describe(const cv::Mat& lum, cv::Point offset) {
   Blob b;
   double sum = 0, sx = 0, sy = 0, sxx = 0, syy = 0, peak = 0;
@@ -270,10 +270,9 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
 }
 
 // `measure(i)` of every frame i of the stack (nullopt: the frame is left out), in frame order.
-// Frames are independent, and each decodes its truth layers (Heliar 640×427: 28 ghost layers,
-// 31 MB a frame): measured in parallel (fit-eval on that capture: 52 → 31 s on 2 cores), each
-// into its own slot. A frame that fails keeps its exception; the first in frame order is
-// rethrown, as a serial loop would have.
+// Frames are independent, and each decodes its truth layers (tens of MB a frame): measured in
+// parallel, each into its own slot. A frame that fails keeps its exception; the first in frame
+// order is rethrown, as a serial loop would have.
 template <class Result, class Measure>
 std::vector<std::optional<Result>> measureFrames(const FrameStack& stack, const char* what, const Measure& measure) {
   const size_t n = stack.frames.size();

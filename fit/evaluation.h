@@ -20,7 +20,7 @@
 //    ghost rendered alone against the true ghost's layer); the PSNR of the model's whole image
 //    against the noise-free flare over that true ghost's own support (its layer > σ).
 //  - Continuity of each true ghost: of the frames it is visible in, the largest share matched by
-//    one and the same model ghost id (1: one track drew it throughout; 0: never found).
+//    one and the same model ghost id (1: one model ghost drew it throughout; 0: never found).
 //  - Light ghosts: unmatched model ghosts on the light's own image, the truth's main
 //    layer minus its ghost layers, where it exceeds light_factor × σ (the core and the
 //    starburst's rays): their centroid inside that region, or most of their light on it.
@@ -174,7 +174,7 @@ struct Evaluation {
   int model_ghosts_pieces = 0;  // of the unmatched, pieces of a true ghost (FrameEvaluation::Unmatched)
   int light_ghosts = 0;         // of the unmatched, on the light's core or rays, over the frames
   // Against the model's ceiling (setCeiling): the frames it was measured in, and the median of
-  // ceiling − PSNR over them (what detection, tracking and the optimizer lost; NaN when none).
+  // ceiling − PSNR over them (what the fitter falls short of the model's best by; NaN when none).
   int ceiling_frames = 0;
   double median_ceiling_gap_db = std::numeric_limits<double>::quiet_NaN();
 
@@ -209,20 +209,16 @@ Evaluation evaluateFrameFits(const FrameFits& fits, const FrameStack& stack,
 
 // ── The model's ceiling ──────────────────────────────────────────────────────────────────────────
 // What the ghost model (model/ghost_shape.h, Walch et al. 2018 §3.2) can describe of a simulated
-// capture at best, whatever the detection, tracking and optimizer: every true ghost of a frame is
-// fitted alone to its own noise-free truth layer, from four starts taken from the layer itself
-// (evaluation.cpp ceilingStarts), each with the fit's cost (the edge term on) and then with the
-// plain squared error, which is what PSNR measures; the best in PSNR is kept. The frame's ceiling
-// is the sum of those fits, measured as fit-eval measures a model: PSNR against the noise-free
-// flare over the flare region, and the centroid error of every visible true ghost (peak >
-// visible_factor × σ) against its fit. A fit that lands below these figures loses to detection,
-// tracking or the optimizer; a target above them is beyond the model. Starts are local, so the
-// figures are lower bounds on what the model could reach, as is fitting crossing ghosts apart (a
-// joint fit of their sum may trade one's error against the other's).
-// Measured (`flarekit fit-ceiling CAPTURE`, every 10th frame of the 640×427 0–30° captures):
-// Heliar 39.0 dB and 1.43 px (6 of 31 visible ghosts within 0.5 px), Tessar 38.5 dB and 0.77 px
-// (10 of 29): 32 dB is within the model's reach, 0.5 px is not for most ghosts, whose caustics and
-// inner edges a smooth fall-off cannot follow. 7.5 min each on 2 cores.
+// capture at best, whatever the fitter's search for ghosts and its optimizer: every true ghost of
+// a frame is fitted alone to its own noise-free truth layer, from four starts taken from the
+// layer itself (evaluation.cpp ceilingStarts), each with the fit's cost (the edge term on) and
+// then with the plain squared error, which is what PSNR measures; the best in PSNR is kept. The
+// frame's ceiling is the sum of those fits, measured as fit-eval measures a model: PSNR against
+// the noise-free flare over the flare region, and the centroid error of every visible true ghost
+// (peak > visible_factor × σ) against its fit. A fit that lands below these figures loses to the
+// fitter's search for ghosts or its optimizer; a target above them is beyond the model. Starts
+// are local, so the figures are lower bounds on what the model could reach, as is fitting
+// crossing ghosts apart (a joint fit of their sum may trade one's error against the other's).
 struct CeilingOptions {
   int frame_step = 10;          // measure frames 0, N, 2N, … of the stack (≥ 1)
   // Fit each true ghost whose peak exceeds this × σ (≥ 0; 0: every ghost with any light, the
