@@ -254,8 +254,8 @@ void registerFitCeiling(CLI::App& app) {
   cmd->add_option("--edge-weight", o->edge_weight, "λ of the first stage of each fit (default 1, as fit)");
   cmd->add_option("--fit-above", o->fit_above,
                   "Fit only the true ghosts whose peak exceeds this many noise σ, the rest drawn as one flat "
-                  "pedestal (the fitter's glare): what a fitter that finds every ghost above that level could "
-                  "reach (default 0: every ghost)");
+                  "pedestal: what a fitter that finds every ghost above that level could reach (default 0: "
+                  "every ghost)");
   cmd->add_flag("--quadratic-pedestal", o->quadratic_pedestal,
                 "With --fit-above: the pedestal a quadratic in x and y over the frame instead of flat");
   cmd->add_option("--sheets", o->sheets,
@@ -299,7 +299,7 @@ void registerBenchFit(CLI::App& app) {
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder, or EXR files / folders")->required();
   cmd->add_flag("--json", o->json, "Print one JSON object (always JSON; accepted for symmetry)");
   cmd->add_option("--frames", o->frames, "Frames sampled evenly (default 3)");
-  cmd->add_option("--seeds", o->seeds, "Starts per frame: the brightest detections (default 1)");
+  cmd->add_option("--seeds", o->seeds, "Starts per frame: the brightest ghost candidates present (default 1)");
   cmd->add_option("--gd-iterations", o->gd_iterations, "Gradient-descent iterations per start (default 200)");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   addStackOptions(cmd, o->stack);

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <optional>
 #include <stdexcept>
 
 #include <opencv2/imgproc.hpp>
@@ -144,12 +143,6 @@ const FrameData& FramePyramid::level(int factor) const {
 
 // ── Bounds ────────────────────────────────────────────────────────────────────────────────────
 
-bool isGlare(const model::GhostParameters& ghost, cv::Size size) {
-  // Twice the sharp bound: a sharp ghost's Fo extrapolated a little beyond its bound by a track
-  // does not turn it into glare.
-  return ghost.outside_falloff > 2 * kSharpOutsideFalloffFraction * std::hypot(size.width, size.height);
-}
-
 namespace {
 
 // The model's bounds on parameter `index` (model::parameterBounds) intersected with [lo, hi].
@@ -160,46 +153,10 @@ model::ParameterBounds modelBoundsWithin(int index, int channels, double lo, dou
   return b;
 }
 
-// The pedestal's bounds (isGlare) on its centre, half-sizes and fall-offs, within the model's
-// own: half-sizes of at least a = 2 (W + H) (at most 0.8 × the model's largest), the centre within
-// f × the frame's size of its middle. A diamond of half-sizes a is the smallest outline whatever
-// Cl and Cr; a frame pixel's |dx| / a + |dy| / a is at most n = (1/2 + f)(W + H) / a, so it lies
-// at least (1 − n) a / √2 inside the outline, beyond an inside fall-off of at most (1 − n) a / 2:
-// the glare is Ii over the whole frame. Up to W + H = 4000 px, a = 2 (W + H), f = 1/2 (the centre
-// anywhere in the frame) and Fi's limit is (W + H) / 2; beyond, f shrinks to 0.01, and the
-// guarantee holds while n < 1 (W + H below 15 686 px). Fo stays above isGlare's limit. Nothing
-// for the other parameters. The faint ghosts' sum the glare stands for is not flat (a quadratic
-// pedestal lifts fit-ceiling --fit-above 6 from 33.1 / 30.0 to 36.9 / 35.5 dB, Heliar / Tessar,
-// --quadratic-pedestal, fit/evaluation.h CeilingOptions::fit_factor), but a glare whose
-// inside fall-off reaches the frame (Fi up to 3 (W + H), seeded at 2.2 (W + H) with Ib = Ii, so
-// that Ib, Ei and the centre shape it) did worse at λ × 1 (640×427 captures; recall % /
-// precision % / median PSNR dB / median centroid error px of the model): Heliar 77.5 / 80.4 /
-// 25.6 / 7.6 → 74.7 / 80.4 / 24.1 / 6.5, Tessar 74.7 / 53.4 / 25.9 / 10.4 → 63.5 / 59.2 / 25.1 /
-// 11.8, and took 92–94 s instead of 39–63.
-std::optional<model::ParameterBounds> glareBounds(int index, int channels, cv::Size size) {
-  using namespace model::param;
-  const model::ParameterLayout layout{channels};
-  auto clamp = [&](double lo, double hi) { return modelBoundsWithin(index, channels, lo, hi); };
-  const double span = size.width + size.height;
-  const double a = std::min(2 * span, 0.8 * model::parameterBounds(kL, channels).upper);
-  const double f = std::clamp(a / (2 * span) - 0.5, 0.01, 0.5);
-  const double n = (0.5 + f) * span / a;
-  const double diag = std::hypot(size.width, size.height);
-  if (index == kMx) return clamp((0.5 - f) * size.width, (0.5 + f) * size.width);
-  if (index == kMy) return clamp((0.5 - f) * size.height, (0.5 + f) * size.height);
-  if (index == kL || index == kR || index == kH) return clamp(a, 4 * span);
-  if (index == layout.fi()) return clamp(0.3, std::max(1.0, 0.5 * std::max(0.0, 1 - n) * a));
-  if (index == layout.fo()) return clamp(4 * kSharpOutsideFalloffFraction * diag, diag);
-  return std::nullopt;
-}
-
 }  // namespace
 
-model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double intensity_limit,
-                                 bool glare) {
+model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double intensity_limit) {
   using namespace model::param;
-  if (glare)
-    if (auto b = glareBounds(index, channels, size)) return *b;
   const model::ParameterLayout layout{channels};
   const double diag = std::hypot(size.width, size.height);
   auto clamp = [&](double lo, double hi) { return modelBoundsWithin(index, channels, lo, hi); };
@@ -212,26 +169,10 @@ model::ParameterBounds fitBounds(int index, int channels, cv::Size size, double 
   return model::parameterBounds(index, channels);
 }
 
-void shapeGlareSeed(cv::Size image_size, model::GhostParameters* glare) {
-  using namespace model::param;
-  const model::ParameterLayout layout{glare->channels};
-  auto within = [&](int index, double value) {
-    const auto b = fitBounds(index, glare->channels, image_size, 0, true);
-    return std::clamp(value, b.lower, b.upper);
-  };
-  const double half_diagonal = 0.5 * std::hypot(image_size.width, image_size.height);
-  glare->center_x = within(kMx, image_size.width / 2.0);
-  glare->center_y = within(kMy, image_size.height / 2.0);
-  glare->left = glare->right = glare->height = fitBounds(kL, glare->channels, image_size, 0, true).lower;
-  glare->inside_falloff = within(layout.fi(), 0.15 * half_diagonal);
-  glare->outside_falloff = within(layout.fo(), half_diagonal);
-}
-
-std::vector<model::ParameterBounds> fitBounds(const GroupCost& cost, const model::GhostParameters& seed) {
-  const bool glare = isGlare(seed, cost.imageSize());
+std::vector<model::ParameterBounds> fitBounds(const GroupCost& cost) {
   std::vector<model::ParameterBounds> bounds;
   for (int k = 0; k < cost.parametersPerGhost(); ++k)
-    bounds.push_back(fitBounds(k, cost.channels(), cost.imageSize(), cost.intensityLimit(), glare));
+    bounds.push_back(fitBounds(k, cost.channels(), cost.imageSize(), cost.intensityLimit()));
   return bounds;
 }
 
@@ -311,12 +252,7 @@ GroupCost::GroupCost(const FramePyramid& pyramid, const EdgeFilter& edge,
     data_peak = std::max(data_peak, peak);
   }
   // A ghost may be up to 20× brighter than the region's brightest valid pixel: its peak may lie
-  // where no pixel is valid. Beside the light's zone that lets a fit put much light where nothing
-  // checks it (Heliar 640×427 λ × 0.99, track 35 at 9–9.8°: Ii 0.09, the fits' PSNR −14 dB).
-  // 4× instead, over λ × 0.98–1.02 (model recall % / precision % / median PSNR dB / median
-  // centroid error px): Heliar 72.5 / 82.2 / 25.3 / 7.2 → 73.4 / 81.3 / 24.3 / 6.6, Tessar
-  // 75.9 / 59.4 / 27.2 / 10.8 → 73.6 / 60.8 / 27.0 / 11.9. Heliar frames whose fits fall below
-  // 15 dB, per λ: 1, 14, 1, 10, 7 → 8, 2, 8, 0, 5: they moved, they did not go.
+  // where no pixel is valid (cost.h intensityLimit).
   intensity_limit_ = 20 * std::max({data_peak, 3 * frame.noise_sigma, 1e-12});
 
   if (!prior_sigmas.empty())
@@ -396,13 +332,9 @@ void GroupCost::evaluateImages(std::span<const model::GhostParameters> input, bo
   render.parallel = true;
   // Tiles of 32 px, not the renderer's 64: a region holds about max_pixels samples at its level
   // (12000: 110 × 110 px), which 64-px tiles cut into four tasks or fewer for two threads, one of
-  // them idle where a ghost covers only part of the region. Heliar 640×427, λ × 0.99 / 1 / 1.01:
-  // fitted in 52–59 s instead of 63–69 s; Tessar in 60–61 s instead of 60–75 s. Tiles move where
-  // the nearest-point search starts along a row, so the fits differ at the level of its tolerance,
-  // and the capture fit is chaotic at that level: mean recall 75.4 → 71.2 % (Heliar) and
-  // 54.4 → 51.4 % (Tessar), PSNR 24.1 → 24.0 and 23.3 → 22.5 dB, centroid error 9.4 → 8.8 and
-  // 11.1 → 15.6 px; 16-px tiles (56 and 58 s) gave 70.9 and 49.4 %, 21.8 and 22.5 dB, 10.9 and
-  // 12.5 px.
+  // them idle where a ghost covers only part of the region. The tiles decide where the
+  // nearest-point search starts along a row, so changing their size changes the fits at the level
+  // of that search's tolerance.
   render.tile_size = 32;
   model::RenderedGhosts rendered;
   if (jacobians)

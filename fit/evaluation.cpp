@@ -38,8 +38,8 @@ struct Blob {
 // Intensity-weighted centroid, peak and radius of a luminance image placed at `offset` in the
 // frame. The radius is √2 × the intensity-weighted RMS distance from the centroid: exactly R for a
 // uniform disc of radius R, and, unlike an area above a fraction of the peak, not shrunk to a few
-// pixels by a caustic's bright spike on a large ghost (Heliar ghost 21: 7.7 px by the area above
-// 10 % of its peak, for a disc ~200 px across), which made its match gate 3 px.
+// pixels by a caustic's bright spike on a large ghost, which would shrink its match gate to the
+// smallest.
 Blob describe(const cv::Mat& lum, cv::Point offset) {
   Blob b;
   double sum = 0, sx = 0, sy = 0, sxx = 0, syy = 0, peak = 0;
@@ -147,10 +147,6 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
   std::vector<cv::Mat> model_images;  // each blob's luminance over model_boxes
   std::vector<cv::Rect> model_boxes;
   for (const auto& g : ghosts) {
-    if (isGlare(g.parameters, stack.size)) {
-      ++fe.glare_ghosts;
-      continue;
-    }
     const cv::Rect box = model::ghostPixelBounds(g.parameters) & image;
     if (box.empty()) continue;
     std::vector<model::GhostParameters> one = {g.parameters};
@@ -274,10 +270,9 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
 }
 
 // `measure(i)` of every frame i of the stack (nullopt: the frame is left out), in frame order.
-// Frames are independent, and each decodes its truth layers (Heliar 640×427: 28 ghost layers,
-// 31 MB a frame): measured in parallel (fit-eval on that capture: 52 → 31 s on 2 cores), each
-// into its own slot. A frame that fails keeps its exception; the first in frame order is
-// rethrown, as a serial loop would have.
+// Frames are independent, and each decodes its truth layers (tens of MB a frame): measured in
+// parallel, each into its own slot. A frame that fails keeps its exception; the first in frame
+// order is rethrown, as a serial loop would have.
 template <class Result, class Measure>
 std::vector<std::optional<Result>> measureFrames(const FrameStack& stack, const char* what, const Measure& measure) {
   const size_t n = stack.frames.size();
@@ -320,8 +315,7 @@ bool EvaluationOptions::IsValid(std::string* error) const {
 double medianOf(std::vector<double> v) {
   v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }), v.end());
   if (v.empty()) return kNaN;
-  // Selection, not a sort: the fitter takes the median of every candidate blob's pixels (a
-  // frame-filling glare's are 10⁵), and sorting them was 2 % of a capture fit's time.
+  // Selection, not a sort: linear in the number of values.
   const size_t n = v.size(), middle = n / 2;
   std::nth_element(v.begin(), v.begin() + middle, v.end());
   if (n % 2) return v[middle];
@@ -401,7 +395,6 @@ Evaluation evaluateGhosts(const GhostsAtAngle& ghosts_at, int channels, const Fr
     ev.true_ghosts_found += fe->true_ghosts_found;
     ev.model_ghosts += fe->model_ghosts;
     ev.model_ghosts_matched += fe->model_ghosts_matched;
-    ev.glare_ghosts += fe->glare_ghosts;
     ev.model_ghosts_pieces += fe->model_ghosts_pieces;
     ev.light_ghosts += fe->light_ghosts;
     ev.frames.push_back(std::move(*fe));
@@ -539,7 +532,6 @@ nlohmann::json Evaluation::toJson() const {
   j["true_ghosts_found"] = true_ghosts_found;
   j["model_ghosts"] = model_ghosts;
   j["model_ghosts_matched"] = model_ghosts_matched;
-  j["glare_ghosts"] = glare_ghosts;
   j["model_ghosts_pieces"] = model_ghosts_pieces;
   j["light_ghosts"] = light_ghosts;
   nlohmann::json fs = nlohmann::json::array();
@@ -553,7 +545,6 @@ nlohmann::json Evaluation::toJson() const {
                   {"true_ghosts_found", f.true_ghosts_found},
                   {"model_ghosts", f.model_ghosts},
                   {"model_ghosts_matched", f.model_ghosts_matched},
-                  {"glare_ghosts", f.glare_ghosts},
                   {"median_centroid_error_px", number(f.medianCentroidErrorPx())},
                   {"median_centroid_error_pct", number(f.medianCentroidErrorPct())},
                   {"median_flux_error", number(f.medianFluxError())},
@@ -599,8 +590,7 @@ std::string Evaluation::BriefReport() const {
       << " %, median PSNR over each ghost's support " << median_ghost_psnr_db << " dB, recall "
       << 100 * recall << " % (" << true_ghosts_found << "/" << true_ghosts_visible
       << "), continuity " << continuity << ", precision " << 100 * precision << " % ("
-      << model_ghosts_matched << "/" << model_ghosts << ", glare not counted: " << glare_ghosts
-      << " in all frames); ";
+      << model_ghosts_matched << "/" << model_ghosts << "); ";
   s << "median PSNR vs capture " << median_capture_psnr_db << " dB.";
   // The ghosts missed most, up to three.
   std::vector<TrueGhostSummary> missed;
@@ -771,9 +761,9 @@ CeilingFrame ceilingOfFrame(const Frame& f, const CeilingOptions& options) {
     cf.ghosts.push_back(std::move(cg));
   }
   const cv::Mat flare_region = (truth.flare > truth.noise_sigma) & (f.valid > 0);
-  // The ghosts left out sum to a pedestal, which the fitter draws as its flat glare (fit/cost.h
-  // isGlare): drawn here as the constant that comes closest to what they leave, in least squares
-  // over the flare region, their mean there.
+  // The ghosts left out sum to a glow, which the fitter draws as the frame's pedestal
+  // (model/pedestal.h): drawn here as the constant that comes closest to what they leave, in least
+  // squares over the flare region (their mean there), or the quadratic that does.
   if (options.fit_factor > 0 && cv::countNonZero(flare_region) > 0) {
     const cv::Mat rest = truth.flare - described;
     if (options.quadratic_pedestal) {

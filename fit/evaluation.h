@@ -15,22 +15,13 @@
 //    any true ghost / model ghosts present. Centroid errors over matched visible pairs.
 //  - Each unmatched model ghost: whether it draws a piece of a true ghost (most of its light lies
 //    within that ghost's light) or light no ghost has (FrameEvaluation::Unmatched).
-//  - A glare (fit/cost.h isGlare) is drawn in the model's image, so PSNR counts it, but it is no
-//    detection: held flat over the frame, it draws the pedestal, not any one ghost, and its
-//    centroid is the frame's middle, whatever the ghosts. The large veils' centroids lie within a
-//    gate of it (their radii are 150–310 px), so, matched like a ghost, a glare "found" them: on
-//    the 640×427 captures (fitter of fe2b4d2, five λ) 544 of the Heliar model's 1131 matched
-//    pairs and 672 of the Tessar's 1148 were a glare, at median centroid errors of 10.0 and
-//    11.4 px. It is left out of the matching, recall, precision and centroid errors, and counted
-//    apart (glare_ghosts). Recall and precision quoted in comments from before this rule (commit
-//    05c548b) count a glare as a detection: compare them with one another, not with later ones.
 //  - Per matched visible pair: the centroid error in px and in % of the true ghost's radius; the
 //    flux error |Σ model − Σ truth| / Σ truth of the ghost's luminance over the image (the model
 //    ghost rendered alone against the true ghost's layer); the PSNR of the model's whole image
 //    against the noise-free flare over that true ghost's own support (its layer > σ).
 //  - Continuity of each true ghost: of the frames it is visible in, the largest share matched by
-//    one and the same model ghost id (1: one track drew it throughout; 0: never found).
-//  - Light ghosts: unmatched model ghosts (not a glare) on the light's own image, the truth's main
+//    one and the same model ghost id (1: one model ghost drew it throughout; 0: never found).
+//  - Light ghosts: unmatched model ghosts on the light's own image, the truth's main
 //    layer minus its ghost layers, where it exceeds light_factor × σ (the core and the
 //    starburst's rays): their centroid inside that region, or most of their light on it.
 //  - Without truth: PSNR of the model against the frame over the pixels where the model exceeds
@@ -87,7 +78,6 @@ struct FrameEvaluation {
   int true_ghosts_found = 0;       // visible and matched
   int model_ghosts = 0;            // model ghosts with any pixel in the image
   int model_ghosts_matched = 0;    // matched to some true ghost
-  int glare_ghosts = 0;            // glare, drawn but not matched (not in model_ghosts; see above)
   int model_ghosts_pieces = 0;     // unmatched model ghosts that are pieces of a true ghost
   int light_ghosts = 0;            // unmatched model ghosts on the light (Unmatched::onLight)
   // Each matched visible true ghost: its model ghost, how far their centroids are apart, how
@@ -183,9 +173,8 @@ struct Evaluation {
   int true_ghosts_visible = 0, true_ghosts_found = 0, model_ghosts = 0, model_ghosts_matched = 0;
   int model_ghosts_pieces = 0;  // of the unmatched, pieces of a true ghost (FrameEvaluation::Unmatched)
   int light_ghosts = 0;         // of the unmatched, on the light's core or rays, over the frames
-  int glare_ghosts = 0;  // summed over the frames
   // Against the model's ceiling (setCeiling): the frames it was measured in, and the median of
-  // ceiling − PSNR over them (what detection, tracking and the optimizer lost; NaN when none).
+  // ceiling − PSNR over them (what the fitter falls short of the model's best by; NaN when none).
   int ceiling_frames = 0;
   double median_ceiling_gap_db = std::numeric_limits<double>::quiet_NaN();
 
@@ -220,53 +209,27 @@ Evaluation evaluateFrameFits(const FrameFits& fits, const FrameStack& stack,
 
 // ── The model's ceiling ──────────────────────────────────────────────────────────────────────────
 // What the ghost model (model/ghost_shape.h, Walch et al. 2018 §3.2) can describe of a simulated
-// capture at best, whatever the detection, tracking and optimizer: every true ghost of a frame is
-// fitted alone to its own noise-free truth layer, from four starts taken from the layer itself
-// (evaluation.cpp ceilingStarts), each with the fit's cost (the edge term on) and then with the
-// plain squared error, which is what PSNR measures; the best in PSNR is kept. The frame's ceiling
-// is the sum of those fits, measured as fit-eval measures a model: PSNR against the noise-free
-// flare over the flare region, and the centroid error of every visible true ghost (peak >
-// visible_factor × σ) against its fit. A fit that lands below these figures loses to detection,
-// tracking or the optimizer; a target above them is beyond the model. Starts are local, so the
-// figures are lower bounds on what the model could reach, as is fitting crossing ghosts apart (a
-// joint fit of their sum may trade one's error against the other's).
-// Measured (`flarekit fit-ceiling CAPTURE`, every 10th frame of the 640×427 0–30° captures):
-// Heliar 39.0 dB and 1.43 px (6 of 31 visible ghosts within 0.5 px), Tessar 38.5 dB and 0.77 px
-// (10 of 29): 32 dB is within the model's reach, 0.5 px is not for most ghosts, whose caustics and
-// inner edges a smooth fall-off cannot follow. 7.5 min each on 2 cores.
+// capture at best, whatever the fitter's search for ghosts and its optimizer: every true ghost of
+// a frame is fitted alone to its own noise-free truth layer, from four starts taken from the
+// layer itself (evaluation.cpp ceilingStarts), each with the fit's cost (the edge term on) and
+// then with the plain squared error, which is what PSNR measures; the best in PSNR is kept. The
+// frame's ceiling is the sum of those fits, measured as fit-eval measures a model: PSNR against
+// the noise-free flare over the flare region, and the centroid error of every visible true ghost
+// (peak > visible_factor × σ) against its fit. A fit that lands below these figures loses to the
+// fitter's search for ghosts or its optimizer; a target above them is beyond the model. Starts
+// are local, so the figures are lower bounds on what the model could reach, as is fitting
+// crossing ghosts apart (a joint fit of their sum may trade one's error against the other's).
 struct CeilingOptions {
   int frame_step = 10;          // measure frames 0, N, 2N, … of the stack (≥ 1)
   // Fit each true ghost whose peak exceeds this × σ (≥ 0; 0: every ghost with any light, the
-  // model's ceiling). Above 0, the fainter ones are drawn as the flat pedestal closest to their
-  // sum (CeilingFrame::pedestal), as the fitter draws them with its glare (fit/cost.h isGlare):
-  // what a fitter that found and described every ghost above that level could reach (the
-  // fitter's detection stops at 6 σ, fit/detection.h levels_sigma). Ghosts each below the noise
-  // sum to much of the flare once the light has left the frame. Measured (`flarekit fit-ceiling
-  // CAPTURE --fit-above N`, every 10th frame of the 640×427 0–30° captures), median PSNR for 0 /
-  // 2 / 4 / 6 / 10 σ: Heliar 39.0 / 37.1 / 33.3 / 33.1 / 29.2 dB, Tessar 38.5 / 36.8 / 33.6 /
-  // 30.0 / 29.3 dB (at 12–22°, 6 σ: Heliar 23.7–28.9, Tessar 22.3–28.5 dB). Without the pedestal,
-  // 6 σ gave 15.8 and 13.5 dB: the PSNR a fit reaches rests on its glare drawing the ghosts it
-  // cannot see. Shaped instead of flat (quadratic_pedestal, `--quadratic-pedestal`), 6 σ gave
-  // Heliar 36.9 and Tessar 35.5 dB (12–22°: 31.0–36.7 and 27.9–35.0): the faint ghosts' sum is
-  // smooth but not flat. With a temporary change, linear along the flare axis (1, x): 35.3 and
-  // 31.9 dB. The fitter's glare so shaped did not get there (fit/cost.cpp glareBounds).
+  // model's ceiling). Above 0, the fainter ones are drawn as one pedestal, the constant closest
+  // to their sum (CeilingFrame::pedestal): what a fitter that found and described every ghost
+  // above that level, and drew the rest as a glow, could reach. Ghosts each below the noise sum
+  // to much of the flare once the light has left the frame.
   double fit_factor = 0;
   // With fit_factor > 0, the pedestal a quadratic in the pixel's x and y (1, x, y, x², xy, y²),
-  // fitted the same way, instead of a constant: whether a glare shaped over the frame would
-  // draw the faint ghosts' sum (the fitter's is flat). The fitter now fits one to what its
-  // ghosts leave once the tracks stand (FitOptions::pedestal). Fitted inside the sweeps instead
-  // (a temporary change: robustly to each frame's residual after its ghosts, the next frame's
-  // ghosts fitted on the frame without it), it lost. Heliar 640×427 at λ × 1, the model's and the
-  // frames' fits' recall % / precision % / median PSNR dB / median centroid error px: each
-  // frame's the last one's plus a correction, Huber at 2 σ, clamped at 0, 45.4 / 62.0 / 15.9 /
-  // 12.3 and 46.8 / 61.8 / 15.5 / 9.8; Tukey at 6 σ, 70.0 / 72.2 / 15.0 / 13.7 and 65.9 / 68.3 /
-  // 14.4 / 9.0 (the correction drifted: its v² term grew 5× over 1.6–16° and lit the frame's dark
-  // corners); fitted afresh each frame, 45.4 / 58.9 / 12.1 / 5.0 and 43.3 / 57.4 / 10.4 / 6.6 (it
-  // took the glare's constant, and the glare sank into the noise); without a constant term (left
-  // to the glare) and not clamped, 64.2 / 78.1 / 23.2 / 4.3 and 66.2 / 77.1 / 24.5 / 5.2; against
-  // 77.5 / 80.4 / 25.6 / 7.6 and 79.2 / 82.3 / 29.1 / 7.8 without a pedestal. What the fitter has
-  // not fitted during the sweeps is not the faint ghosts alone, as here, but the large veils it
-  // has not found yet too, and the quadratic took part of them before detection could.
+  // the form the fitter's pedestal has (model/pedestal.h), fitted the same way, instead of a
+  // constant.
   bool quadratic_pedestal = false;
   double visible_factor = 10;   // centroid errors over ghosts above this × σ, fit-eval's rule (> 0)
   int max_iterations = 100;     // Levenberg–Marquardt iterations per start and stage (≥ 1)

@@ -117,29 +117,6 @@ TEST(EvaluateModel, MatchGateFollowsTheGhostsSizeNotACausticsSpike) {
   EXPECT_NEAR(matched[0]["radius_px"].get<double>(), 50, 2);
 }
 
-// A glare (fit/cost.h isGlare) draws the pedestal over the frame, not a ghost: a veil wider than
-// the frame, centred in it, is not found by it, although their centroids coincide. It counts in
-// the PSNR (the frame is the veil's plateau, which the glare draws) and apart from the model's
-// ghosts; a sharp model ghost on the veil is found.
-TEST(EvaluateModel, AGlareFindsNoGhost) {
-  TempDir dir;
-  const cv::Mat veil = render(disc(100, 65, 120, 1e-3));
-  model::GhostParameters glare = disc(100, 65, 1, 1e-3);
-  shapeGlareSeed(kSize, &glare);
-  ASSERT_TRUE(isGlare(glare, kSize));
-  const auto ev = evaluateModel(modelOf(glare), stackOf(dir, veil, veil, veil));
-  ASSERT_EQ(ev.frames.size(), 1u);
-  EXPECT_EQ(ev.true_ghosts_visible, 1);
-  EXPECT_EQ(ev.true_ghosts_found, 0);
-  EXPECT_EQ(ev.model_ghosts, 0);
-  EXPECT_EQ(ev.glare_ghosts, 1);
-  EXPECT_EQ(ev.toJson()["frames"][0]["glare_ghosts"], 1);
-  EXPECT_GT(ev.median_psnr_db, 30);
-  const auto sharp = evaluateModel(modelOf(disc(100, 65, 120, 1e-3)), stackOf(dir, veil, veil, veil));
-  EXPECT_EQ(sharp.true_ghosts_found, 1);
-  EXPECT_EQ(sharp.glare_ghosts, 0);
-}
-
 // A model ghost matched to no true ghost says whose light it draws: a small disc on the rim of a
 // large true ghost, beyond the gate of its centroid, draws a piece of it; a disc where no ghost is
 // draws light no ghost has.
@@ -510,8 +487,7 @@ TEST(ModelCeiling, ReachesAGhostOfTheModelsShapeAndNamesOneItCannotDescribe) {
 }
 
 // Above a level, only the brighter ghosts are fitted and the fainter ones drawn as one flat
-// pedestal, as the fitter's glare draws them: here a layer flat over the frame, 10 σ, under a
-// ghost of the model's shape, 200 σ.
+// pedestal: here a layer flat over the frame, 10 σ, under a ghost of the model's shape, 200 σ.
 TEST(ModelCeiling, AboveALevelTheFainterGhostsAreDrawnAsAPedestal) {
   TempDir dir;
   const cv::Mat own = render(testing::ghost(60, 65, 25, 30, 22, 2e-3, 1e-3));

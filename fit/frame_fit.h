@@ -1,7 +1,7 @@
 #pragma once
 // Stage 5 of the fit (docs/fitting.md): every frame's ghosts fitted to the frame, seeded from the
-// ghost candidates at the frame's angle. A ghost is present where its traces say so: no
-// detection, no tracking, no decision to keep or drop.
+// ghost candidates at the frame's angle. A ghost is present where its candidate is (its traces
+// span the frame's row of the sweep); nothing here decides to keep or drop one.
 //
 // Per frame, the shades of all ghosts present and the frame's pedestal (model/pedestal.h, the glow
 // of veils with no border in the frame) are solved together (fit/shade.h); then each ghost is

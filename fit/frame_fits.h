@@ -43,7 +43,7 @@ struct FrameFits {
   };
   std::vector<FittedFrame> frames;  // ascending angle
 
-  // The fits of every fitted frame of `result`, as the tracking left them.
+  // The fits of every fitted frame of `result` (stage 5, fit/frame_fit.h), in angle order.
   static FrameFits fromResult(const FitResult& result, cv::Size image_size, int channels);
   // InputError naming the file and key on a malformed file.
   static FrameFits load(const std::filesystem::path& path);

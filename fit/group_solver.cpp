@@ -61,9 +61,7 @@ double since(Clock::time_point t0) {
 // Each seed's fit bounds (fit/cost.h fitBounds), in the seeds' order.
 using GroupBounds = std::vector<std::vector<model::ParameterBounds>>;
 GroupBounds boundsOf(const GroupCost& cost, std::span<const model::GhostParameters> seeds) {
-  GroupBounds bounds;
-  for (const auto& s : seeds) bounds.push_back(fitBounds(cost, s));
-  return bounds;
+  return GroupBounds(seeds.size(), fitBounds(cost));
 }
 
 // The seeds as parameter blocks, within their bounds.
@@ -169,15 +167,12 @@ class TraceCallback : public ceres::IterationCallback {
 };
 
 // Ceres's function tolerance ends a solve on any candidate whose cost is within the tolerance of
-// the current one, rejected and line-searched ones included: a step that the projection onto the
-// bounds and the line search cut to almost nothing ended a solve mid-descent (fit_capture_test's
-// CarriesAGhostIntoTheLightNearTheAxis, 0.75°: after 8 iterations, at |Δcost|/cost 7.3e-7, right
-// after steps that had lowered the cost by 1.7). Whether such a candidate comes up depends on the
-// rounding: that test failed when the normal equations were summed in 16 chunks and passed with 4,
-// 8, 12 and 32. The tolerance is therefore MINPACK's (lmder's ftol, Moré 1978): the solve has
-// converged when both the actual and the predicted decrease are within it, and the actual is no
-// more than twice the predicted; a step whose model promised much and gave nothing shrinks the
-// trust region instead.
+// the current one, rejected and line-searched ones included, so a step that the projection onto
+// the bounds and the line search cut to almost nothing ends a solve mid-descent, and whether such
+// a candidate comes up depends on the rounding. The tolerance is therefore MINPACK's (lmder's
+// ftol, Moré 1978): the solve has converged when both the actual and the predicted decrease are
+// within it, and the actual is no more than twice the predicted; a step whose model promised much
+// and gave nothing shrinks the trust region instead.
 class RelativeReductionTolerance : public ceres::IterationCallback {
  public:
   explicit RelativeReductionTolerance(double function_tolerance) : tolerance_(function_tolerance) {}
@@ -218,20 +213,16 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   std::vector<double*> pointers;
   for (auto& b : blocks) pointers.push_back(b.data());
   // The samples' rows as their normal equations' square root, the loss per pixel inside them
-  // (GroupCost::robustSample; FITTING_NOTES: per-pixel Cauchy is robust against unmodelled
-  // blobs): the steps of blocks of one pixel each, without Ceres's bookkeeping per block, and the
-  // products formed on every thread.
+  // (GroupCost::robustSample; shared/FITTING_NOTES.md: per-pixel Cauchy is robust against
+  // unmodelled blobs): the steps of blocks of one pixel each, without Ceres's bookkeeping per
+  // block, and the products formed on every thread.
   problem.AddResidualBlock(new SquareRootResidual(cost, normal), nullptr, pointers);
   if (cost.priorResidualCount() > 0)
     for (size_t g = 0; g < blocks.size(); ++g)
       problem.AddResidualBlock(new PriorResidual(cost, static_cast<int>(g)), nullptr, pointers[g]);
   // On its bounds Ceres projects each step onto the box; where a parameter sits on its bound and
-  // the step points out, the projection can go nowhere, and the solve ends at its seed by the
-  // parameter tolerance (Heliar 640×427, 15.4–16.4°: a veil whose outside fall-off was on its bound
-  // kept its seed bit for bit over six frames). Solving again with the parameters on their bounds
-  // held (an active set) lowered those costs, but over λ × 0.99 / 1 / 1.01 of the 640×427 captures
-  // the median PSNR fell (Heliar 26.1 → 24.2 dB, Tessar 23.6 → 22.9 dB). Freed, that veil's fits
-  // jumped from frame to frame (15.4, 15.6, 15.8°: centre x 170, 121, 166 px).
+  // the step points out, the projection can go nowhere, and the solve may end at its seed by the
+  // parameter tolerance (describeCeresEnd in fit/optimizer_bench.h tells such a stall).
   for (size_t g = 0; g < blocks.size(); ++g) {
     if (!options.held_parameters.empty())
       problem.SetManifold(pointers[g], new ceres::SubsetManifold(static_cast<int>(blocks[g].size()),
@@ -246,24 +237,14 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   so.minimizer_type = ceres::TRUST_REGION;
   so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
   // The normal equations JᵀJ by Cholesky rather than J by QR: Ceres's linear algebra runs on one
-  // thread, and most frames of a capture are one group (fit_capture.cpp), so it was the serial part
-  // of a fit. The Heliar 640×427 capture fitted in 79 s instead of 109 s (two quiet runs each),
-  // with recall, precision, PSNR and centroid error within what λ ± 1 % alone moves them.
+  // thread (see the header), so it is the serial part of a solve, and Cholesky is the cheaper of
+  // the two.
   so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   // Ceres's projected line search along each step (used with bounds) interpolates quadratically:
   // from the cost and slope at the start and the cost at the trial point. Its default, cubic, also
-  // asks for the gradient at every trial point, so every trial rendered all the derivative images
-  // and formed JᵀJ (Heliar 640×427 capture: 14700 renders with derivatives, 255 plain). Now a trial
-  // costs a plain render, and derivatives are rendered where a step is taken (5955 with
-  // derivatives, 22562 plain: the quadratic backtracks more). Measured over λ × 0.99 / 1 / 1.01 on
-  // the Heliar and Tessar 640×427 captures, together with kRefinePixels 10000 (fit_capture.cpp):
-  // fits in 58–66 s instead of 67–81 s (Heliar) and 62–64 s instead of 71–77 s (Tessar); mean
-  // recall 64.8 → 75.4 % (Heliar) and 52.2 → 54.4 % (Tessar), precision 85.6 → 87.0 % and
-  // 84.5 → 73.9 %, PSNR 24.6 → 24.1 dB and 23.1 → 23.3 dB, centroid error 7.4 → 9.4 px and
-  // 14.1 → 11.1 px; Heliar held out (--holdout odd) 23.1 → 22.8 dB. Without the line search (its
-  // step count 0) a trial was cheaper still, but on bounds the projected steps stalled: `bench
-  // fit`'s two separate ghosts ended at cost 5.8 against the gradient descent's 2.5, with Fi, Ei
-  // and Eo on their bounds.
+  // asks for the gradient at every trial point, so every trial would render all the derivative
+  // images and form JᵀJ; this way a trial costs a plain render, and derivatives are rendered where
+  // a step is taken. The line search itself stays: without it, projected steps stall on bounds.
   so.line_search_interpolation_type = ceres::QUADRATIC;
   so.max_num_iterations = options.max_iterations;
   // Only a candidate of exactly the current cost ends the solve in Ceres; the tolerance is

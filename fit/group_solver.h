@@ -11,8 +11,7 @@
 //    their square root (fit/normal_equations.h), which gives it the steps, gradient and cost of one
 //    block per pixel. Ceres itself runs on one thread: it sums its blocks' costs per thread, so
 //    with more threads the cost's rounding, the steps it accepts and so the whole capture's fit
-//    depended on the machine's thread count (data_synthetic Heliar: Spearman ρ of issue 7 0.79 with
-//    2 threads, 0.90 with 1).
+//    would depend on the machine's thread count.
 //  - kWalchGd: the paper's optimizer (Walch et al. 2018 §3.3.2) as the baseline: gradient descent
 //    with central-difference gradients, one step size per parameter, a global learning rate
 //    multiplied by 0.8 every 100 iterations, online updates in a fixed order, shape before shade.
@@ -41,12 +40,7 @@ Optimizer parseOptimizer(const std::string& name);
 
 struct SolverOptions {
   Optimizer optimizer = Optimizer::kCeres;
-  // Ceres: maximum Levenberg–Marquardt iterations per group and frame (≥ 1). With 30, on the
-  // 640×427 captures (0–30° at 0.2°, means over λ × 0.98–1.02 of recall % / precision % / median
-  // PSNR dB / median centroid error px), the Heliar's frame fits went 72.2/79.5/28.7/7.6 →
-  // 72.8/82.2/29.6/7.5 and its model 73.1/81.6/25.8/7.7 → 72.9/83.4/26.1/7.7, but the Tessar's
-  // model fell 75.0/69.3/25.5/10.6 → 67.3/67.6/24.7/11.3 (its fits' recall 75.8 → 67.6), and
-  // a fit took 88–105 s and 95–131 s in that run, against 70–79 s and 77 s with 15.
+  // Ceres: maximum Levenberg–Marquardt iterations per group and frame (≥ 1).
   int max_iterations = 15;
   // Ceres: stop when a step's actual and predicted decrease are both below this fraction of the
   // cost (MINPACK's ftol) (> 0).

@@ -296,7 +296,7 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     GhostCurves g;
     g.id = c.id;
     for (int k = 0; k < p; ++k)
-      g.bounds.push_back(fitBounds(k, channels, stack.size, model::kUnbounded, false));
+      g.bounds.push_back(fitBounds(k, channels, stack.size, model::kUnbounded));
     g.angle_min = std::max(capture_min, m.capture.fieldAngle(stack.frames[c.first_row].angle_deg) - half_step);
     g.angle_max = std::min(capture_max, m.capture.fieldAngle(stack.frames[c.last_row].angle_deg) + half_step);
     for (int k = 0; k < p; ++k) {

@@ -6,9 +6,8 @@
 // one block of rows per sample.
 //
 // Why: Ceres runs on one thread here (group_solver.h), and with the samples' rows as its residuals
-// it copied, checked, scaled and multiplied every row of the Jacobian there: in a profile of the
-// Heliar 640×427 capture fit, 22 % of the CPU samples, on the main thread while the second core
-// waited. Here the products run tile by tile on every thread, and Ceres's own work is N + 1 rows.
+// it would copy, check, scale and multiply every row of the Jacobian there while the other cores
+// wait. Here the products run tile by tile on every thread, and Ceres's own work is N + 1 rows.
 //
 // The square-root form: with S = diag(A)^-½ (1 where a parameter reaches no sample), the scaled
 // Â = S A S = Pᵀ L D Lᵀ P (LDLᵀ with pivoting: Â may be singular), J̃ = D^½ Lᵀ P S⁻¹ and

@@ -20,8 +20,8 @@ bool OptimizerBenchOptions::IsValid(std::string* error) const {
   return fit.IsValid(error);
 }
 
-CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& seed,
-                          const model::GhostParameters& ceres_end, const model::GhostParameters& gd_end) {
+CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& ceres_end,
+                          const model::GhostParameters& gd_end) {
   CeresEnd end;
   const std::vector<double> a = model::toParameterVector(ceres_end), b = model::toParameterVector(gd_end);
   constexpr int kSteps = 10;
@@ -34,7 +34,7 @@ CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& seed,
   }
   end.stalled = end.path_costs[1] < end.path_costs[0];
   const auto names = model::parameterNames(ceres_end.channels);
-  const auto bounds = fitBounds(cost, seed);
+  const auto bounds = fitBounds(cost);
   for (size_t k = 0; k < a.size(); ++k)
     if (a[k] <= bounds[k].lower || a[k] >= bounds[k].upper) end.on_bounds.push_back(names[k]);
   return end;
@@ -124,7 +124,7 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
           break;
         }
       entry["ceres_reached_gd_cost"] = ok;
-      const CeresEnd end = describeCeresEnd(lm_cost, seed, c.ghosts[0], g.ghosts[0]);
+      const CeresEnd end = describeCeresEnd(lm_cost, c.ghosts[0], g.ghosts[0]);
       entry["ceres_parameters_on_bounds"] = end.on_bounds;
       entry["path_costs_ceres_to_gd"] = end.path_costs;
       if (!ok) {

@@ -38,9 +38,8 @@ struct CeresEnd {
   bool stalled = false;                    // path_costs[1] < path_costs[0]
   std::vector<std::string> on_bounds;      // Ceres's parameters on their fit bounds (cost.h fitBounds)
 };
-// `cost`: the group cost both optimizers minimised (one ghost); `seed` decides glare as
-// solveGroup does.
-CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& seed,
-                          const model::GhostParameters& ceres_end, const model::GhostParameters& gd_end);
+// `cost`: the group cost both optimizers minimised (one ghost).
+CeresEnd describeCeresEnd(GroupCost& cost, const model::GhostParameters& ceres_end,
+                          const model::GhostParameters& gd_end);
 
 }  // namespace flarekit::fit

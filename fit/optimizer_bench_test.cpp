@@ -41,7 +41,7 @@ TEST(DescribeCeresEnd, AnotherGhostOfTheFrameIsABasinOfItsOwn) {
   std::vector<GhostParameters> start = {seed};
   const GroupFitResult r = solveGroup(cost, start, SolverOptions{});
   ASSERT_NEAR(r.ghosts[0].center_x, 40, 0.2);
-  const CeresEnd end = describeCeresEnd(cost, seed, r.ghosts[0], right);
+  const CeresEnd end = describeCeresEnd(cost, r.ghosts[0], right);
   ASSERT_EQ(end.path_costs.size(), 11u);
   EXPECT_NEAR(end.path_costs.front(), r.final_cost, 1e-9 * r.final_cost);
   EXPECT_FALSE(end.stalled);
@@ -67,7 +67,7 @@ TEST(DescribeCeresEnd, ASlopeTowardsTheOtherEndIsAStallAndTheBoundIsNamed) {
   stuck.outside_falloff = kSharpOutsideFalloffFraction * std::hypot(size.width, size.height);
   const std::vector<GhostParameters> seeds = {stuck};
   GroupCost cost(data, edge, {}, seeds, options);
-  const CeresEnd end = describeCeresEnd(cost, stuck, stuck, truth);
+  const CeresEnd end = describeCeresEnd(cost, stuck, truth);
   EXPECT_TRUE(end.stalled);
   EXPECT_LT(end.path_costs.back(), end.path_costs.front());
   EXPECT_EQ(end.on_bounds, std::vector<std::string>{"Fo"});

@@ -1,7 +1,8 @@
 #pragma once
 // Fitting a frame's pedestal (model/pedestal.h): the quadratic closest to what the fitted ghosts
 // leave of a frame. It is linear in its terms, so iteratively reweighted least squares solves it
-// without a solver (fit/fit_capture.h fits one per frame once the tracks stand).
+// without a solver. The model fit (fit/model_fit.h) fits one to every frame under the model's
+// ghosts; the frame fits solve theirs with the ghosts' shades (fit/shade.h).
 
 #include <string>
 

@@ -7,20 +7,10 @@
 // Ghosts add (§3.2: "multiple ghosts can be additively blended"). Images are CV_32FC1 (grey
 // ghosts) or CV_32FC3 (R, G, B ghosts); every ghost must have the image's channel count.
 //
-// Measured and not taken (stop 41): the mean over the pixel instead. With a fall-off exponent below
-// 1 the slope at the outline is infinite (model/intensity.h), and point samples make the fit's cost
-// rough below a pixel: at Ceres's end of `flarekit bench fit`'s Heliar 640×427 case at 5°, the
-// cost's central differences in Mx were −22.9, −12.4, −3.2 and +2.4 at steps of 5e-6, 5e-5, 5e-4
-// and 5e-3 px, against an analytic −3.3. Averaging the transfer function over ±½ pixel along d
-// (closed form: differences of its antiderivative) made them −1.076 to −1.079 at steps of 5e-5 to
-// 5e-3 px against an analytic −1.073, and `bench fit` had no stall: Ceres reached the gradient
-// descent's cost in 3 of 6 cases instead of 2 (Heliar 5°: 8.7× sooner in time, 15.7× in
-// evaluations; Heliar 25°: 18.7×, 44.0×; Tessar 5°: 20.8×, 28.4×). But over λ × 0.98–1.02 the
-// models' recall / precision / median PSNR / centroid error went 73.1 % / 81.6 % / 25.8 dB / 7.7 px
-// → 75.0 / 77.1 / 26.2 / 8.5 (Heliar) and 75.0 / 69.3 / 25.5 / 10.6 → 73.5 / 59.3 / 24.6 / 8.6
-// (Tessar), a fit took 89–135 s instead of 70–79 s, and the 12-frame CLI hold-out fell from 40.7 to
-// 19.9 dB: from a seed 8 px behind, a fit went to Ei = Eo = 0.1 and Ib 2.5, a rim far thinner than
-// a pixel that averaged pixels show by its area.
+// Point samples, not the mean over the pixel: with a fall-off exponent below 1 the slope at the
+// outline is infinite (model/intensity.h), so point samples make a fit's cost rough below a pixel,
+// which the mean would smooth; but with the mean a fit can shrink a ghost to a rim far thinner
+// than a pixel (Ei = Eo = 0.1), which averaged pixels still show by its area.
 //
 // Work: a ghost touches only the pixels whose centres can be within Fo of its outline (its
 // bounding box grown by Fo, see ghostPixelBounds). Inside that box, square blocks are classified

@@ -1,10 +1,8 @@
 #pragma once
 // The pedestal of a frame: the smooth glow under the ghosts, summed from veils each too faint for
-// the fitter to find (fit/cost.h isGlare draws its flat part as a ghost) and what is left of the
-// ones it found. Not part of the model of Walch et al. 2018, ours: on the 640×427 synthetic
-// captures the true ghosts fainter than 6 σ of the pixel noise sum to a glow that a flat constant
-// leaves at a median PSNR of 33.1 (Heliar Tronnier) and 30.0 dB (Brendel Tessar), a quadratic at
-// 36.9 and 35.5 dB (flarekit fit-ceiling --fit-above 6 [--quadratic-pedestal]).
+// the fitter to find and what is left of the ones it found. Not part of the model of Walch et al.
+// 2018, ours. The glow is smooth but not flat, so a quadratic rather than a constant (`flarekit
+// fit-ceiling --fit-above N [--quadratic-pedestal]` measures what each can describe).
 //
 // A quadratic in the capture's pixel coordinates, centred and scaled by the capture width W:
 //   u = (x − W/2) / W,  v = (y − H/2) / W,
