@@ -203,7 +203,8 @@ class ModelResidual : public ceres::CostFunction {
 };
 
 // `p` as a polynomial that stays within bounds `b` over [lo, hi] (where the model file is
-// checked): where it strays, the least-squares polynomial through its values clamped to the bounds, of the highest degree that stays within them.
+// checked): where it strays, the least-squares polynomial through its values clamped to the
+// bounds, of the highest degree that stays within them.
 model::Polynomial withinBounds(const ScaledPolynomial& p, const model::ParameterBounds& b, double lo, double hi) {
   constexpr int kChecks = 129;
   auto inside = [&](const model::Polynomial& q) {

@@ -7,6 +7,7 @@
 #include <random>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "common/error.h"
 #include "common/testing.h"
@@ -19,8 +20,15 @@ using flarekit::testing::TempDir;
 // A model with two grey ghosts whose parameters are valid over their ranges.
 FlareModel sampleModel(int channels = 1) {
   FlareModel m;
-  m.capture = {"Canon EOS 5D Mark II", "EF 24mm f/1.4L II", 1.4, 100, 1.0, "Olympus CLV-S",
-               cv::Size(320, 200), 6.4, 0.2};
+  m.capture.camera = "Canon EOS 5D Mark II";
+  m.capture.lens = "EF 24mm f/1.4L II";
+  m.capture.f_number = 1.4;
+  m.capture.iso = 100;
+  m.capture.exposure_s = 1.0;
+  m.capture.light = "Olympus CLV-S";
+  m.capture.image_size = cv::Size(320, 200);
+  m.capture.pixel_pitch_um = 6.4;
+  m.capture.angle_step_deg = 0.2;
   m.channels = channels;
   const std::vector<double> base = toParameterVector([&] {
     GhostParameters g;
@@ -144,6 +152,47 @@ TEST(FlareModel, FileRoundTripIsExact) {
     EXPECT_EQ(back.capture.focal_length_mm, m.capture.focal_length_mm);
     EXPECT_EQ(cv::norm(back.render(3, 10), m.render(3, 10), cv::NORM_INF), 0.0);
   }
+}
+
+// Version 2 records the optical zero the fit measured; a version 1 file, which has none, loads
+// and renders as it did (axis at the image centre, rig angles as field angles).
+TEST(FlareModel, TheOpticalZeroRoundTripsAndVersion1FilesLoadAsBefore) {
+  TempDir dir;
+  FlareModel m = sampleModel();
+  m.capture.angle_zero_deg = 0.35;
+  m.capture.optical_axis_px = cv::Point2d(167.3, 95.8);
+  m.save(dir / "v2.json");
+  const FlareModel back = FlareModel::load(dir / "v2.json");
+  EXPECT_EQ(back.toJson()["version"], 2);
+  EXPECT_EQ(back.capture.angle_zero_deg, 0.35);
+  ASSERT_TRUE(back.capture.optical_axis_px.has_value());
+  EXPECT_EQ(*back.capture.optical_axis_px, cv::Point2d(167.3, 95.8));
+  EXPECT_DOUBLE_EQ(back.capture.fieldAngle(3.35), 3.0);
+
+  nlohmann::json v1 = sampleModel().toJson();
+  v1["version"] = 1;
+  const FlareModel old = FlareModel::load(writeModelText(dir, "v1.json", v1));
+  EXPECT_EQ(old.capture.angle_zero_deg, 0.0);
+  EXPECT_FALSE(old.capture.optical_axis_px.has_value());
+  EXPECT_EQ(old.capture.opticalAxis(), cv::Point2d(160, 100));
+  EXPECT_EQ(cv::norm(old.render(3, 20), sampleModel().render(3, 20), cv::NORM_INF), 0.0);
+}
+
+// A roll turns the flare about the optical axis, not the image centre: at 180° every ghost's
+// light lands mirrored through the axis.
+TEST(FlareModel, RollTurnsTheFlareAboutTheOpticalAxis) {
+  FlareModel m = sampleModel();
+  const cv::Point2d axis(190, 92);
+  m.capture.optical_axis_px = axis;
+  auto centroid = [](const cv::Mat& image) {  // pixel (i, j) has its centre at (i + ½, j + ½)
+    const cv::Moments mo = cv::moments(image);
+    return cv::Point2d(mo.m10 / mo.m00 + 0.5, mo.m01 / mo.m00 + 0.5);
+  };
+  const cv::Point2d c0 = centroid(m.render(3, 0));
+  const cv::Point2d c180 = centroid(m.render(3, 180));
+  EXPECT_GT(cv::norm(c0 - axis), 10.0);
+  EXPECT_NEAR(c180.x, 2 * axis.x - c0.x, 0.05);
+  EXPECT_NEAR(c180.y, 2 * axis.y - c0.y, 0.05);
 }
 
 TEST(FlareModel, APedestalRoundTripsAndIsDrawnWithinItsRange) {
