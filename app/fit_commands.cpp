@@ -76,7 +76,7 @@ void registerFit(CLI::App& app) {
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
       "fit", "Fit a model of every ghost to a capture: ghosts found once in the sweep image, fitted in "
-             "every frame, polynomials refined against the frames (docs/fitting.md); writes model.json");
+             "every frame, made polynomials in the light angle (docs/fitting.md); writes model.json");
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder (manifest.json), or EXR files / folders")
       ->required();
   cmd->add_option("--out", o->out, "Model file to write (model.json)")->required();

@@ -35,10 +35,10 @@ void registerRender(CLI::App& app) {
   };
   auto o = std::make_shared<Options>();
   auto* cmd = app.add_subcommand(
-      "render", "Render a flare model (model.json) at a rig angle and roll into a linear EXR image");
+      "render", "Render a flare model (model.json) at a light angle and roll into a linear EXR image");
   cmd->add_option("MODEL", o->model, "Flare model file (format flarekit.flare-model)")->required();
-  cmd->add_option("--angle", o->angle_deg, "Rig angle θ, degrees")->required();
-  cmd->add_option("--roll", o->roll_deg, "Roll φ about the image centre, degrees (default 0)");
+  cmd->add_option("--angle", o->angle_deg, "Light angle θ from the optical axis (the rig angle less the model's optical zero), degrees")->required();
+  cmd->add_option("--roll", o->roll_deg, "Roll φ about the optical axis, degrees (default 0)");
   cmd->add_option("--width", o->width, "Output width, pixels (default: the capture's; with --height)");
   cmd->add_option("--height", o->height, "Output height, pixels (default: the capture's; with --width)");
   cmd->add_option("--out", o->out, "Output OpenEXR file (float, R,G,B or Y)")->required();
@@ -90,7 +90,7 @@ void registerModelInfo(CLI::App& app) {
                                  "Show a flare model: capture, ghosts, their angle ranges, and their "
                                  "parameters at an angle");
   cmd->add_option("MODEL", o->model, "Flare model file")->required();
-  cmd->add_option("--angle", o->angle_deg, "Show the parameters at this rig angle θ, degrees (default 0)");
+  cmd->add_option("--angle", o->angle_deg, "Show the parameters at this light angle θ from the optical axis, degrees (default 0)");
   cmd->add_flag("--json", o->json, "Print one JSON object");
   cmd->callback([o] {
     checkFinite(o->angle_deg, "--angle");
