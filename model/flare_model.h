@@ -163,8 +163,8 @@ class FlareModel {
   ViewTransform viewAt(double roll_deg, std::optional<cv::Size> size = std::nullopt) const;
 
   // Renders all ghosts and the pedestal at θ and roll φ (degrees) into an image of `size`
-  // (default: the capture size), CV_32FC(channels). The roll rotates the sample points about the
-  // image centre exactly.
+  // (default: the capture size), CV_32FC(channels), through viewAt: the roll turns the flare
+  // exactly about the optical axis.
   cv::Mat render(double angle_deg, double roll_deg = 0, std::optional<cv::Size> size = std::nullopt,
                  const RenderOptions& options = {}) const;
 };

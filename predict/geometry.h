@@ -4,9 +4,9 @@
 // evaluate the polynomials ... the lens flare rendering can be rotated around its image center to
 // match the roll angle").
 //
-// Conventions (shared/DESIGN.md): θ is the angle between the optical axis and the direction to the
+// Conventions (docs/design.md): θ is the angle between the optical axis and the direction to the
 // light; positive θ puts the light's image left of the centre (−x) at roll φ = 0; a roll φ rotates
-// the flare counter-clockwise as displayed (y down) about the image centre, as model/
+// the flare counter-clockwise as displayed (y down) about the optical axis, as model/
 // ViewTransform does. So a light whose image direction from the centre is u = (ux, uy) (y down)
 // has φ = atan2(uy, −ux), in [0, 360).
 //

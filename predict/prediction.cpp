@@ -161,12 +161,8 @@ double captureIlluminance(const model::FlareModel& m, const PredictOptions& opti
 
 cv::Mat renderLight(const model::FlareModel& m, double model_angle_deg, double model_roll_deg, double brightness,
                     const cv::Vec3d& color, cv::Size image_size, const model::RenderOptions& options) {
-  std::vector<model::GhostParameters> ghosts;
-  for (const auto& g : m.ghostsAt(model_angle_deg)) ghosts.push_back(g.parameters);
-  // Walch 2018 §3.4.1: the rendering is rotated about the image centre to the light's roll.
-  const model::ViewTransform view = m.viewAt(model_roll_deg, image_size);
-  cv::Mat img = model::renderGhosts(ghosts, image_size, m.channels, options, view);
-  m.pedestalAt(model_angle_deg).addTo(img, m.capture.image_size, view);  // the glow under them
+  // Walch 2018 §3.4.1: the rendering is rotated about the optical axis to the light's roll.
+  cv::Mat img = m.render(model_angle_deg, model_roll_deg, image_size, options);
   // A model value of clip_level clips in a capture frame; after Eq. 2's B (the scene's exposure
   // against the capture's), model·B / clip_level is the fraction of the scene camera's white.
   if (m.capture.clip_level > 0) brightness /= m.capture.clip_level;
