@@ -17,6 +17,7 @@
 #include "acquisition/stepper_motion.h"
 #include "common/atomic_file.h"
 #include "common/config.h"
+#include "common/folder_lock.h"
 #include "common/log.h"
 #include "common/progress.h"
 
@@ -146,7 +147,7 @@ class Session {
 
  private:
   Json newManifest() const;
-  void checkResume(const Json& old) const;
+  void checkResume(const ConfigNode& old) const;
   void writeManifest() { writeJsonFile(out_ / "manifest.json", manifest_); }
   template <class F>
   auto retry(const std::string& what, bool camera, int index, F&& fn) -> decltype(fn());
@@ -234,22 +235,23 @@ Json Session::newManifest() const {
   return m;
 }
 
-void Session::checkResume(const Json& old) const {
+void Session::checkResume(const ConfigNode& old) const {
   const std::string file = (out_ / "manifest.json").string();
   auto differs = [&](const std::string& what, const Json& a, const Json& b) {
     if (a != b)
       throw InputError(file, "cannot resume: the " + what + " differs from the stopped session (" +
-                                 a.dump() + " there, " + b.dump() + " now); resume with the same "
+                                 jsonText(a, -1) + " there, " + jsonText(b, -1) + " now); resume with the same "
                                  "rig and options, or capture into a new folder");
   };
   const Json fresh = newManifest();
-  differs("rig name", old["rig"]["name"], fresh["rig"]["name"]);
-  differs("angle plan", old["plan"]["angles_deg"], fresh["plan"]["angles_deg"]);
-  differs("exposure bracket", old["plan"]["exposures_s"], fresh["plan"]["exposures_s"]);
-  differs("number of dark frames", old["plan"]["dark_frames"], fresh["plan"]["dark_frames"]);
-  differs("ISO", old["camera"]["iso"], fresh["camera"]["iso"]);
-  differs("f-number", old["camera"]["f_number"], fresh["camera"]["f_number"]);
-  differs("rig's simulated axis offset or angle zero", old["rig"].value("simulation", Json()),
+  differs("rig name", old["rig"]["name"].json(), fresh["rig"]["name"]);
+  differs("angle plan", old["plan"]["angles_deg"].json(), fresh["plan"]["angles_deg"]);
+  differs("exposure bracket", old["plan"]["exposures_s"].json(), fresh["plan"]["exposures_s"]);
+  differs("number of dark frames", old["plan"]["dark_frames"].json(), fresh["plan"]["dark_frames"]);
+  differs("ISO", old["camera"]["iso"].json(), fresh["camera"]["iso"]);
+  differs("f-number", old["camera"]["f_number"].json(), fresh["camera"]["f_number"]);
+  const auto simulation = old["rig"].find("simulation");
+  differs("rig's simulated axis offset or angle zero", simulation ? simulation->json() : Json(),
           fresh["rig"].value("simulation", Json()));
 }
 
@@ -306,7 +308,7 @@ void Session::captureDarks() {
     }
   }
   logInfo("Taking " + std::to_string(plan_.dark_frames) + " dark frames per exposure");
-  fs::create_directories(out_ / "darks");
+  createFolder(out_ / "darks");
   Json entries = Json::array();
   for (size_t k = 0; k < plan_.exposures_s.size(); ++k) {
     const double t = plan_.exposures_s[k];
@@ -374,7 +376,7 @@ void Session::captureFrame(int index, double angle_deg) {
   entry["exposure_ratios"] = ratios;
 
   if (plan_.keep_raw) {
-    fs::create_directories(out_ / "raw");
+    createFolder(out_ / "raw");
     Json raws = Json::array();
     for (size_t k = 0; k < bracket.size(); ++k) {
       // Bayer frames as DNG (black/white levels and EXIF exposure travel with them, and
@@ -411,7 +413,7 @@ void Session::captureFrame(int index, double angle_deg) {
     }
     ExrWriteOptions write;
     write.pixel_type = peak < 60000 ? ExrPixelType::kHalf : ExrPixelType::kFloat;
-    fs::create_directories(out_ / "truth");
+    createFolder(out_ / "truth");
     writeExr(out_ / ("truth/" + name + ".exr"), truth, write);
     entry["truth_file"] = "truth/" + name + ".exr";
   }
@@ -455,42 +457,60 @@ CaptureSummary Session::run() {
   }
 
   const fs::path manifest_path = out_ / "manifest.json";
+  std::error_code ec;
+  if (options_.resume && !fs::exists(manifest_path, ec))
+    throw InputError(out_.string() + ": no capture to resume (no manifest.json)");
+  if (fs::exists(out_, ec) && !fs::is_directory(out_, ec))
+    throw InputError(out_.string() + ": exists and is not a folder");
+  createFolder(out_);
+  // Held until the session ends: one process per capture folder, and so per rig.
+  const FolderLock lock(out_);
   std::set<int> done;
   if (options_.resume) {
-    if (!fs::exists(manifest_path))
-      throw InputError(out_.string() + ": no capture to resume (no manifest.json)");
-    ConfigNode root = loadJsonFile(manifest_path);
+    const ConfigNode root = loadJsonFile(manifest_path);
     checkFormat(root, "flarekit.capture", 1);
-    Json old = root.json();
-    checkResume(old);
+    checkResume(root);
+    // Taken over from the stopped session: what it measured, each field read with its type so a
+    // damaged manifest is named, not half used.
     manifest_ = newManifest();
-    manifest_["darks"] = old.value("darks", Json::array());
-    manifest_["image"] = old.value("image", manifest_["image"]);
-    for (const auto& f : old["frames"]) {
-      const int index = f.value("index", -1);
-      const std::string file = f.value("file", "");
-      if (index < 0 || index >= static_cast<int>(angles_.size()) || done.count(index)) continue;
+    if (const auto image = root.find("image")) {
+      manifest_["image"]["width"] = image->integer("width", 0);
+      manifest_["image"]["height"] = image->integer("height", 0);
+    }
+    if (const auto darks = root.find("darks")) {
+      for (size_t k = 0; k < darks->size(); ++k) {
+        const ConfigNode d = (*darks)[k];
+        manifest_["darks"].push_back({{"exposure_s", d["exposure_s"].number()},
+                                      {"file", d["file"].string()},
+                                      {"frames", d["frames"].integer()}});
+      }
+    }
+    const ConfigNode frames = root["frames"];
+    for (size_t k = 0; k < frames.size(); ++k) {
+      const ConfigNode f = frames[k];
+      const long long index = f["index"].integer();
+      const std::string file = f["file"].string();
+      if (index < 0 || index >= static_cast<long long>(angles_.size()) || done.count(static_cast<int>(index)))
+        continue;
       if (!fs::exists(out_ / file)) continue;  // lost: capture again
-      done.insert(index);
-      manifest_["frames"].push_back(f);
+      done.insert(static_cast<int>(index));
+      manifest_["frames"].push_back(f.json());
     }
     summary_.frames_already_done = static_cast<int>(done.size());
     logInfo("Resuming " + out_.string() + ": " + std::to_string(done.size()) + " of " +
             std::to_string(angles_.size()) + " frames done");
   } else {
-    if (fs::exists(manifest_path))
+    if (fs::exists(manifest_path, ec))
       throw InputError(out_.string() +
                        ": already holds a capture (manifest.json); add --resume to continue it, "
                        "or choose another folder");
-    if (fs::exists(out_) && !fs::is_directory(out_))
-      throw InputError(out_.string() + ": exists and is not a folder");
     manifest_ = newManifest();
   }
   // A capture killed while writing leaves at worst stray temporaries of the atomic writes; they
   // belong to no frame. Resumed or not: a capture killed during its first manifest write has a
   // stray temporary and no manifest, and is started again without --resume.
   removeStrayTemporaries(out_);
-  fs::create_directories(out_ / "frames");
+  createFolder(out_ / "frames");
   manifest_["frames_done"] = static_cast<int>(manifest_["frames"].size());
   writeManifest();
 

@@ -4,7 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cmath>
+#include <functional>
 #include <fstream>
 #include <random>
 
@@ -13,6 +16,7 @@
 #include "acquisition/simulated_camera.h"
 #include "common/config.h"
 #include "common/exr.h"
+#include "common/folder_lock.h"
 #include "common/testing.h"
 
 namespace flarekit::acquisition {
@@ -235,6 +239,53 @@ TEST(Capture, StopsAfterTheCurrentFrameAndResumesExactly) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("angle plan"), std::string::npos) << e.what();
   }
+}
+
+// A damaged manifest is named with the field's path, never half used.
+TEST(Capture, ResumeNamesAManifestFieldOfTheWrongType) {
+  testing::TempDir dir;
+  Rig rig = testRig();
+  const CapturePlan plan = smallPlan(2);
+  RigDevices d = devices(rig);
+  runCapture(rig, d, plan, dir.path() / "cap", {});
+  const nlohmann::json good = manifest(dir.path() / "cap");
+  CaptureOptions resume;
+  resume.resume = true;
+  const std::vector<std::pair<std::function<void(nlohmann::json&)>, std::string>> damages = {
+      {[](nlohmann::json& m) { m["rig"] = 3; }, "manifest.json: rig: must be a table, got an integer"},
+      {[](nlohmann::json& m) { m["frames"][1] = 2; }, "manifest.json: frames[1]: must be a table, got an integer"},
+      {[](nlohmann::json& m) { m["frames"][0]["index"] = "0"; }, "manifest.json: frames[0].index: must be an integer, got a string"},
+      {[](nlohmann::json& m) { m["plan"] = "x"; }, "manifest.json: plan: must be a table, got a string"},
+      {[](nlohmann::json& m) { m["darks"] = {1}; }, "manifest.json: darks[0]: must be a table, got an integer"}};
+  for (const auto& [damage, message] : damages) {
+    nlohmann::json m = good;
+    damage(m);
+    writeJsonFile(dir.path() / "cap" / "manifest.json", m);
+    RigDevices fresh = devices(rig);
+    try {
+      runCapture(rig, fresh, plan, dir.path() / "cap", resume);
+      ADD_FAILURE() << "accepted: " << message;
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), (dir.path() / "cap" / message).string());
+    }
+  }
+}
+
+// One process per capture folder: a second session is refused while the first holds it.
+TEST(Capture, ASecondSessionOnAFolderInUseIsRefused) {
+  testing::TempDir dir;
+  Rig rig = testRig();
+  fs::create_directories(dir.path() / "cap");
+  const FolderLock held(dir.path() / "cap");
+  RigDevices d = devices(rig);
+  try {
+    runCapture(rig, d, smallPlan(2), dir.path() / "cap", {});
+    FAIL();
+  } catch (const RuntimeError& e) {
+    EXPECT_EQ(std::string(e.what()), (dir.path() / "cap").string() + ": in use by process " +
+                                         std::to_string(::getpid()) + "; wait for it to finish or stop it");
+  }
+  EXPECT_FALSE(fs::exists(dir.path() / "cap" / "manifest.json"));
 }
 
 TEST(Capture, TransientFaultsAreRetried) {

@@ -1,14 +1,14 @@
 #include "acquisition/raw_decode.h"
 
 #include <algorithm>
-#include <fstream>
 #include <memory>
 #include <vector>
 
 #include <libraw/libraw.h>
 #include <opencv2/imgcodecs.hpp>
 
-#include "common/atomic_file.h"
+#include "common/error.h"
+#include "common/input_file.h"
 
 namespace flarekit::acquisition {
 namespace {
@@ -88,9 +88,7 @@ RawFrame decodeRawBuffer(const void* data, size_t size, const std::string& name)
 }
 
 RawFrame decodeRawFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path.string(), "cannot open the file");
-  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = readInputFile(path, kMaxRawFileBytes);
   if (bytes.empty()) throw InputError(path.string(), "the file is empty");
   return decodeRawBuffer(bytes.data(), bytes.size(), path.string());
 }
@@ -103,7 +101,7 @@ bool isLinearImageFile(const std::filesystem::path& path) {
 
 RawFrame loadLinearImage(const std::filesystem::path& path, double exposure_s, double black_level,
                          double white_level, Cfa cfa) {
-  if (!std::filesystem::exists(path)) throw InputError(path.string(), "no such file");
+  checkInputFile(path);
   cv::Mat m = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
   if (m.empty()) throw InputError(path.string(), "not an image OpenCV can read");
   if (m.depth() != CV_16U)

@@ -289,7 +289,8 @@ Rig loadRig(const std::filesystem::path& path) {
 std::filesystem::path findRig(const std::string& name_or_path) {
   namespace fs = std::filesystem;
   const fs::path p(name_or_path);
-  if (fs::exists(p)) return p;
+  std::error_code ec;
+  if (fs::exists(fs::symlink_status(p, ec))) return p;  // even a broken link: loading names it
   const std::string file = p.has_extension() ? name_or_path : name_or_path + ".toml";
   if (p.parent_path().empty()) {
     std::vector<fs::path> preferred;

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -20,6 +21,7 @@
 #include "acquisition/raw_decode.h"
 #include "acquisition/rig.h"
 #include "app/commands.h"
+#include "common/config.h"
 #include "common/error.h"
 #include "common/log.h"
 
@@ -28,6 +30,18 @@ namespace {
 
 using namespace flarekit::acquisition;
 namespace fs = std::filesystem;
+
+// `text` as one word for a POSIX shell: as it is when it holds no special character, else in
+// single quotes.
+std::string shellQuoted(const std::string& text) {
+  const bool plain = !text.empty() && std::all_of(text.begin(), text.end(), [](unsigned char c) {
+    return std::isalnum(c) || (c != 0 && std::strchr("_./:=@%+-,", c) != nullptr);
+  });
+  if (plain) return text;
+  std::string out = "'";
+  for (char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
 
 std::atomic<bool> g_stop{false};
 
@@ -222,12 +236,20 @@ void registerCapture(CLI::App& app) {
     options.stop_requested = &g_stop;
     const CaptureSummary summary = runCapture(rig, devices, plan, o->out, options);
     logInfo(summary.BriefReport());
-    if (summary.termination == "interrupted")
+    if (summary.termination == "interrupted") {
+      // Every option that shapes the session, so the line works when pasted.
+      std::string resume = "flarekit capture --rig " + shellQuoted(rig.file.string()) + " --out " +
+                           shellQuoted(o->out) + " --from " + numberText(plan.from_deg) + " --to " +
+                           numberText(plan.to_deg) + " --step " + numberText(plan.step_deg) + " --exposures ";
+      for (size_t i = 0; i < plan.exposures_s.size(); ++i) resume += (i ? "," : "") + numberText(plan.exposures_s[i]);
+      resume += " --dark-frames " + std::to_string(plan.dark_frames);
+      if (o->keep_raw) resume += " --keep-raw";
+      if (o->no_truth) resume += " --no-truth";
+      if (o->half_frames) resume += " --half-frames";
       throw Interrupted("capture stopped after frame " +
-                        std::to_string(summary.frames_already_done + summary.frames_captured) +
-                        " of " + std::to_string(summary.frames_planned) +
-                        "; continue with: flarekit capture --rig " + rig.file.string() +
-                        " --out " + o->out + " --resume");
+                        std::to_string(summary.frames_already_done + summary.frames_captured) + " of " +
+                        std::to_string(summary.frames_planned) + "; continue with: " + resume + " --resume");
+    }
   });
 }
 
@@ -317,7 +339,7 @@ void registerBenchMerge(CLI::App& app) {
                         {"merge_to_memcpy_ratio", merge / copy},
                         {"goal_seconds", 0.25},
                         {"repeat", o->repeat}};
-    std::cout << j.dump(2) << "\n";
+    std::cout << jsonText(j) << "\n";
   });
 }
 

@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "common/config.h"
 #include "common/exr.h"
 
 namespace flarekit::app {
@@ -46,7 +47,7 @@ void registerCommonCommands(CLI::App& app) {
       else
         std::cout << toText(info);
     }
-    if (options->json) std::cout << all.dump(2) << "\n";
+    if (options->json) std::cout << jsonText(all) << "\n";
   });
 }
 

@@ -10,6 +10,7 @@
 #include "acquisition/capture.h"
 #include "acquisition/rig.h"
 #include "app/commands.h"
+#include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/log.h"
 #include "common/shipped_file.h"
@@ -51,7 +52,7 @@ void registerDemoCommand(CLI::App& app) {
     const fs::path out = o->out;
     const fs::path capture_dir = out / "capture", model_file = out / "model.json",
                    report_dir = out / "report";
-    fs::create_directories(out);
+    createFolder(out);
     std::optional<tbb::global_control> threads;
     if (o->threads > 0)
       threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(o->threads));

@@ -191,9 +191,9 @@ void registerFitEval(CLI::App& app) {
     std::optional<model::FlareModel> m;
     std::optional<fit::FrameFits> fits;
     if (frame_fits)
-      fits = fit::FrameFits::parse(root.json().dump(), o->model);
+      fits = fit::FrameFits::fromJson(root);
     else
-      m = model::FlareModel::parse(root.json().dump(), o->model);
+      m = model::FlareModel::fromJson(root);
     const cv::Size size = m ? m->capture.image_size : fits->image_size;
     const int channels = m ? m->channels : fits->channels;
     fit::FrameStack stack = loadStack(o->stack);
@@ -231,7 +231,7 @@ void registerFitEval(CLI::App& app) {
     }
     if (!o->plot.empty()) writeImage8(o->plot, fit::evaluationPlot(ev));
     if (o->json)
-      std::cout << ev.toJson().dump(2) << "\n";
+      std::cout << jsonText(ev.toJson()) << "\n";
     else
       std::cout << ev.BriefReport() << "\n";
   });
@@ -280,7 +280,7 @@ void registerFitCeiling(CLI::App& app) {
     const fit::ModelCeiling ceiling = fit::measureModelCeiling(stack, options);
     if (!o->sheets.empty()) fit::writeCeilingSheets(o->sheets, ceiling);
     if (o->json)
-      std::cout << ceiling.toJson().dump(2) << "\n";
+      std::cout << jsonText(ceiling.toJson()) << "\n";
     else
       std::cout << ceiling.BriefReport() << "\n";
   });
@@ -313,7 +313,7 @@ void registerBenchFit(CLI::App& app) {
     if (!options.IsValid(&error)) throw InputError(error);
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, o->threads);
     fit::FrameStack stack = loadStack(o->stack);
-    std::cout << fit::benchOptimizers(stack, options).dump(2) << "\n";
+    std::cout << jsonText(fit::benchOptimizers(stack, options)) << "\n";
   });
 }
 

@@ -1,5 +1,6 @@
 // The flarekit command: parses arguments, calls the libraries, maps errors to exit codes
 // (0 success, 1 runtime failure, 2 bad usage or input, 130 interrupted).
+#include <filesystem>
 #include <iostream>
 
 #include <CLI/CLI.hpp>
@@ -51,6 +52,14 @@ int main(int argc, char** argv) {
   } catch (const RuntimeError& e) {
     logError(e.what());
     return 1;
+  } catch (const std::filesystem::filesystem_error& e) {
+    // A path the libraries stat or list without their own check: a name that cannot be resolved
+    // is the user's input (2), anything else (permissions, a full disk) the environment's (1).
+    const std::error_code c = e.code();
+    const bool input = c == std::errc::no_such_file_or_directory || c == std::errc::too_many_symbolic_link_levels ||
+                       c == std::errc::not_a_directory || c == std::errc::filename_too_long;
+    logError(e.path1().string() + ": " + c.message() + (input ? "" : " (check the folder's permissions and free space)"));
+    return input ? 2 : 1;
   } catch (const std::exception& e) {
     logError(std::string("unexpected failure: ") + e.what());
     return 1;

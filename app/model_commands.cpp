@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/commands.h"
+#include "common/config.h"
 #include "common/error.h"
 #include "common/exr.h"
 #include "common/image.h"
@@ -114,7 +115,7 @@ void registerModelInfo(CLI::App& app) {
       nlohmann::json j = {{"file", o->model},   {"channels", m.channels},
                           {"capture", capture}, {"angle_deg", o->angle_deg},
                           {"ghosts", ghosts},   {"pedestal", pedestal}};
-      std::cout << j.dump(2) << "\n";
+      std::cout << jsonText(j) << "\n";
       return;
     }
     const auto& c = m.capture;
@@ -169,7 +170,7 @@ void registerBench(CLI::App& app) {
     if (!o->IsValid(&error)) throw InputError("bench model: " + error);
     const model::RenderBenchmarkResult r = model::runRenderBenchmark(*o);
     if (*json)
-      std::cout << model::toJson(r).dump(2) << "\n";
+      std::cout << jsonText(model::toJson(r)) << "\n";
     else
       std::cout << r.BriefReport() << "\n";
   });

@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "app/commands.h"
+#include "common/config.h"
 #include "common/error.h"
 #include "common/exr.h"
 #include "common/image.h"
@@ -65,7 +66,7 @@ void registerLensInfo(CLI::App& app) {
     const Lens lens = loadLens(o->lens);
     const LensInfo info = describeLens(lens);
     if (o->json) {
-      std::cout << lensInfoJson(lens, info).dump(2) << "\n";
+      std::cout << jsonText(lensInfoJson(lens, info)) << "\n";
       return;
     }
     std::ostringstream out;
@@ -210,7 +211,7 @@ void registerBench(CLI::App& app) {
   cmd->add_flag("--json", o->json, "Print one JSON object (the only output format)");
   cmd->callback([o] {
     const Lens lens = loadLens(o->lens);
-    std::cout << benchmarkRender(lens, o->bench).toJson().dump(2) << "\n";
+    std::cout << jsonText(benchmarkRender(lens, o->bench).toJson()) << "\n";
   });
 }
 

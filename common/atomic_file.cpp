@@ -7,7 +7,6 @@
 #include <cstring>
 #include <fstream>
 #include <random>
-#include <sstream>
 #include <vector>
 
 #include "common/error.h"
@@ -71,6 +70,17 @@ void checkWritable(const fs::path& path) {
     throw RuntimeError("cannot write " + path.string() + ": it is a folder");
 }
 
+void createFolder(const fs::path& folder) {
+  std::error_code ec;
+  if (fs::is_directory(folder, ec)) {
+    if (::access(folder.c_str(), W_OK) != 0)
+      throw RuntimeError("cannot write in folder " + folder.string() + ": " + errnoText());
+    return;
+  }
+  fs::create_directories(folder, ec);
+  if (ec) throw RuntimeError("cannot create folder " + folder.string() + ": " + ec.message());
+}
+
 void writeFileAtomically(const fs::path& path,
                          const std::function<void(const fs::path& temporary)>& write) {
   checkWritable(path);
@@ -101,17 +111,6 @@ void writeTextFileAtomically(const fs::path& path, std::string_view content) {
     if (!out) throw RuntimeError("cannot write " + path.string() + ": " + errnoText() +
                                  " (is the disk full?)");
   });
-}
-
-std::string readTextFile(const fs::path& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw InputError(path.string(), "no such file");
-  if (fs::is_directory(path, ec)) throw InputError(path.string(), "is a folder, not a file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path.string(), "cannot open: " + errnoText());
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 }  // namespace flarekit

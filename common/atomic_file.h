@@ -15,6 +15,10 @@ namespace flarekit {
 // work, so a mistyped --out fails at once and not after minutes of fitting.
 void checkWritable(const std::filesystem::path& path);
 
+// Creates an output folder and its parents, or checks that an existing one is writable. Throws
+// RuntimeError "cannot create folder <folder>: <reason>" (a read-only disk, a file in the way).
+void createFolder(const std::filesystem::path& folder);
+
 // Writes `path` atomically. `write` receives the temporary path (same folder, same extension, so
 // writers that choose the format from the extension, such as cv::imwrite, work) and must create
 // the file there. If `write` throws, the temporary file is removed, `path` is untouched and the
@@ -30,8 +34,5 @@ void writeTextFileAtomically(const std::filesystem::path& path, std::string_view
 // writers killed mid-write left (they belong to no file), so that a folder resumed or written
 // again holds only whole files. Errors are ignored: a stray that cannot be removed is harmless.
 void removeStrayTemporaries(const std::filesystem::path& folder);
-
-// Reads a whole file; throws InputError("<path>: cannot read ...") when it is missing.
-std::string readTextFile(const std::filesystem::path& path);
 
 }  // namespace flarekit

@@ -1,4 +1,5 @@
 #include "common/atomic_file.h"
+#include "common/input_file.h"
 
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -20,7 +21,7 @@ namespace {
 using testing::TempDir;
 namespace fs = std::filesystem;
 
-std::string slurp(const fs::path& p) { return readTextFile(p); }
+std::string slurp(const fs::path& p) { return readInputFile(p); }
 
 int countEntries(const fs::path& dir) {
   int n = 0;

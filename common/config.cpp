@@ -7,6 +7,7 @@
 #include <toml++/toml.h>
 
 #include "common/atomic_file.h"
+#include "common/input_file.h"
 #include "common/error.h"
 
 namespace flarekit {
@@ -18,18 +19,8 @@ std::string childPath(const std::string& parent, std::string_view key) {
   return parent.empty() ? std::string(key) : parent + "." + std::string(key);
 }
 
-// Converts a TOML node to JSON, keeping integers apart from floats.
-Json tomlToJson(const toml::node& node) {
-  if (auto* t = node.as_table()) {
-    Json j = Json::object();
-    for (const auto& [k, v] : *t) j[std::string(k.str())] = tomlToJson(v);
-    return j;
-  }
-  if (auto* a = node.as_array()) {
-    Json j = Json::array();
-    for (const auto& v : *a) j.push_back(tomlToJson(v));
-    return j;
-  }
+// Converts a TOML value (not a table or array) to JSON, keeping integers apart from floats.
+Json tomlValueToJson(const toml::node& node) {
   if (auto* v = node.as_integer()) return Json(v->get());
   if (auto* v = node.as_floating_point()) return Json(v->get());
   if (auto* v = node.as_boolean()) return Json(v->get());
@@ -49,6 +40,37 @@ Json tomlToJson(const toml::node& node) {
                   int(d.day), int(x.hour), int(x.minute), int(x.second));
   }
   return Json(std::string(buf));
+}
+
+// "line:column" (1-based) of the byte at `offset`.
+std::string lineColumn(std::string_view text, size_t offset) {
+  size_t line = 1, col = 1;
+  for (size_t i = 0; i < offset && i < text.size(); ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      col = 1;
+    } else {
+      ++col;
+    }
+  }
+  return std::to_string(line) + ":" + std::to_string(col);
+}
+
+// Converts a TOML tree to JSON; InputError when it nests deeper than kMaxJsonDepth.
+Json tomlToJson(const toml::node& node, const std::string& file, int depth = 0) {
+  if (depth > kMaxJsonDepth)
+    throw InputError(file, "not valid TOML here: nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+  if (auto* t = node.as_table()) {
+    Json j = Json::object();
+    for (const auto& [k, v] : *t) j[std::string(k.str())] = tomlToJson(v, file, depth + 1);
+    return j;
+  }
+  if (auto* a = node.as_array()) {
+    Json j = Json::array();
+    for (const auto& v : *a) j.push_back(tomlToJson(v, file, depth + 1));
+    return j;
+  }
+  return tomlValueToJson(node);
 }
 
 }  // namespace
@@ -175,25 +197,36 @@ bool ConfigNode::boolean(std::string_view key, bool fallback) const {
   return c ? c->boolean() : fallback;
 }
 
+void checkJsonDepth(std::string_view text, const std::string& file) {
+  int depth = 0;
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\') ++i;
+      else if (c == '"') in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxJsonDepth)
+        throw InputError(file + ":" + lineColumn(text, i),
+                         "not valid JSON: nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+}
+
 ConfigNode parseJson(std::string_view text, const std::string& file) {
+  checkJsonDepth(text, file);
   auto root = std::make_shared<Json>();
   try {
     *root = Json::parse(text.begin(), text.end());
   } catch (const Json::parse_error& e) {
-    // Line and column from the byte offset nlohmann reports.
-    size_t line = 1, col = 1;
-    for (size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
-      if (text[i] == '\n') {
-        ++line;
-        col = 1;
-      } else {
-        ++col;
-      }
-    }
     std::string what = e.what();
     auto pos = what.find("] ");
     if (pos != std::string::npos) what = what.substr(pos + 2);
-    throw InputError(file + ":" + std::to_string(line) + ":" + std::to_string(col), "not valid JSON: " + what);
+    throw InputError(file + ":" + lineColumn(text, e.byte > 0 ? e.byte - 1 : 0), "not valid JSON: " + what);
   } catch (const Json::exception& e) {
     // Other parser failures, e.g. a number too large for a double (1e999).
     std::string what = e.what();
@@ -206,7 +239,7 @@ ConfigNode parseJson(std::string_view text, const std::string& file) {
 }
 
 ConfigNode loadJsonFile(const std::filesystem::path& path) {
-  return parseJson(readTextFile(path), path.string());
+  return parseJson(readInputFile(path), path.string());
 }
 
 ConfigNode parseToml(std::string_view text, const std::string& file) {
@@ -218,13 +251,13 @@ ConfigNode parseToml(std::string_view text, const std::string& file) {
     throw InputError(file + ":" + std::to_string(b.line) + ":" + std::to_string(b.column),
                      "not valid TOML: " + std::string(e.description()));
   }
-  auto root = std::make_shared<Json>(tomlToJson(table));
+  auto root = std::make_shared<Json>(tomlToJson(table, file));
   const Json* value = root.get();
   return ConfigNode(root, value, file, "");
 }
 
 ConfigNode loadTomlFile(const std::filesystem::path& path) {
-  return parseToml(readTextFile(path), path.string());
+  return parseToml(readInputFile(path), path.string());
 }
 
 int checkFormat(const ConfigNode& root, std::string_view format, int max_version) {
@@ -243,8 +276,12 @@ int checkFormat(const ConfigNode& root, std::string_view format, int max_version
   return static_cast<int>(version);
 }
 
+std::string jsonText(const nlohmann::json& value, int indent) {
+  return value.dump(indent, ' ', false, Json::error_handler_t::replace);
+}
+
 void writeJsonFile(const std::filesystem::path& path, const nlohmann::json& value) {
-  writeTextFileAtomically(path, value.dump(2) + "\n");
+  writeTextFileAtomically(path, jsonText(value) + "\n");
 }
 
 }  // namespace flarekit

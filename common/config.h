@@ -69,6 +69,15 @@ class ConfigNode {
   std::string key_path_;
 };
 
+// Deepest nesting of arrays and tables a JSON or TOML input may have. FlareKit's own formats
+// nest at most six levels; the limit keeps a hostile file from exhausting the stack.
+inline constexpr int kMaxJsonDepth = 64;
+
+// InputError "<file>:<line>:<column>: ..." when JSON text nests deeper than kMaxJsonDepth. Run
+// before parsing: copying, printing and destroying a parsed tree recurse once per level.
+// parseJson calls it; it is public for JSON that other parsers read (glTF).
+void checkJsonDepth(std::string_view text, const std::string& file);
+
 // Loads a JSON file; InputError naming the file and line on syntax errors.
 ConfigNode loadJsonFile(const std::filesystem::path& path);
 // Parses JSON text; `file` names it in messages.
@@ -81,7 +90,11 @@ ConfigNode parseToml(std::string_view text, const std::string& file);
 // Returns the version.
 int checkFormat(const ConfigNode& root, std::string_view format, int max_version);
 
-// Writes JSON (indented, newline-terminated) atomically.
+// JSON as FlareKit prints it: indented by `indent` (-1: one line); bytes that are not UTF-8 (from
+// a file name or an EXR attribute) become U+FFFD instead of failing.
+std::string jsonText(const nlohmann::json& value, int indent = 2);
+
+// Writes jsonText(value) and a newline atomically.
 void writeJsonFile(const std::filesystem::path& path, const nlohmann::json& value);
 
 }  // namespace flarekit

@@ -23,6 +23,23 @@ TEST(Config, JsonSyntaxErrorNamesFileAndLine) {
   EXPECT_NE(e.find("not valid JSON"), std::string::npos) << e;
 }
 
+// Deep nesting is refused before parsing, where copying or printing the tree would overflow the stack.
+TEST(Config, DeepNestingIsBadInputNamingWhere) {
+  const std::string deep = "{\"a\": " + std::string(100000, '[') + std::string(100000, ']') + "}";
+  EXPECT_EQ(errorOf([&] { parseJson(deep, "model.json"); }),
+            "model.json:1:" + std::to_string(7 + kMaxJsonDepth - 1) + ": not valid JSON: nested deeper than 64 levels");
+  // Brackets inside strings are text, not nesting.
+  EXPECT_NO_THROW(parseJson("{\"a\": \"" + std::string(1000, '[') + "\\\"\"}", "x.json"));
+  const std::string toml = "a = " + std::string(200, '[') + std::string(200, ']') + "\n";
+  EXPECT_NE(errorOf([&] { parseToml(toml, "rig.toml"); }).find("rig.toml"), std::string::npos);
+}
+
+// Text that is not UTF-8 (a file name, an EXR attribute) prints with U+FFFD instead of failing.
+TEST(Config, JsonTextReplacesBytesThatAreNotUtf8) {
+  const nlohmann::json j = {{"scene", std::string("scene\xff.json")}};
+  EXPECT_EQ(jsonText(j, -1), "{\"scene\":\"scene\xef\xbf\xbd.json\"}");
+}
+
 TEST(Config, NumberOverflowIsBadInput) {
   std::string e = errorOf([] { parseJson("{\"x\": 1e999}", "model.json"); });
   EXPECT_EQ(e.rfind("model.json", 0), 0u) << e;

@@ -1,5 +1,7 @@
 #include "common/error.h"
 
+#include <charconv>
+
 namespace flarekit {
 
 std::string oneLine(std::string_view message) {
@@ -30,5 +32,14 @@ std::string joined(std::string_view file, std::string_view problem) {
 
 InputError::InputError(std::string_view file, std::string_view problem)
     : std::runtime_error(joined(file, problem)) {}
+
+template <typename T>
+std::string shortestText(T v) {
+  char buffer[64];
+  return std::string(buffer, std::to_chars(buffer, buffer + sizeof buffer, v).ptr);
+}
+
+std::string numberText(double v) { return shortestText(v); }
+std::string numberText(float v) { return shortestText(v); }
 
 }  // namespace flarekit

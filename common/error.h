@@ -12,6 +12,11 @@ namespace flarekit {
 // Collapses a message to one line (library messages sometimes carry newlines).
 std::string oneLine(std::string_view message);
 
+// A number for a message: the shortest text that reads back as the same value ("1.5", "1e+308").
+// Never throws, also for subnormals, infinities and NaN.
+std::string numberText(double v);
+std::string numberText(float v);
+
 // Bad input: a file, value or option the user gave is wrong. Exit code 2.
 class InputError : public std::runtime_error {
  public:

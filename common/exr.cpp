@@ -36,6 +36,7 @@
 
 #include "common/atomic_file.h"
 #include "common/error.h"
+#include "common/input_file.h"
 
 namespace flarekit {
 namespace {
@@ -130,9 +131,7 @@ std::vector<LayerLayout> layoutOf(const fs::path& path, const Imf::ChannelList& 
 
 // Opens an EXR file for reading with every check that does not need the pixels.
 std::unique_ptr<Imf::InputFile> openExr(const fs::path& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw InputError(path.string(), "no such file");
-  if (fs::is_directory(path, ec)) throw InputError(path.string(), "is a folder, not an EXR file");
+  const std::uintmax_t file_bytes = checkInputFile(path);
   bool tiled = false, deep = false, multipart = false;
   if (!Imf::isOpenExrFile(path.c_str(), tiled, deep, multipart))
     throw InputError(path.string(), "not an OpenEXR file (no EXR magic number)");
@@ -147,6 +146,15 @@ std::unique_ptr<Imf::InputFile> openExr(const fs::path& path) {
   if (dw.min.x != 0 || dw.min.y != 0)
     throw InputError(path.string(), "data window starts at (" + std::to_string(dw.min.x) + ", " +
                                         std::to_string(dw.min.y) + "); FlareKit needs it at (0, 0)");
+  // Checked before any pixel buffer is allocated: a damaged header must not claim gigabytes.
+  const double pixels = (double(dw.max.x) + 1) * (double(dw.max.y) + 1);
+  double pixel_bytes = 0;
+  for (auto it = file->header().channels().begin(); it != file->header().channels().end(); ++it)
+    pixel_bytes += it.channel().type == Imf::HALF ? 2 : 4;
+  if (pixels * pixel_bytes > double(file_bytes) * kMaxExrCompressionRatio)
+    throw InputError(path.string(), "corrupt header: its data window (" + std::to_string(dw.max.x + 1) + " x " +
+                                        std::to_string(dw.max.y + 1) + " pixels) cannot fit in a file of " +
+                                        std::to_string(file_bytes) + " bytes");
   if (!file->isComplete())
     throw InputError(path.string(), "truncated: the file ends before all pixel data");
   return file;
@@ -225,26 +233,6 @@ std::optional<ExrAttribute> typedValue(const Imf::Attribute& a) {
   return std::nullopt;
 }
 
-std::string formatNumber(double v) {
-  std::ostringstream ss;
-  ss << std::setprecision(std::numeric_limits<double>::max_digits10) << v;
-  std::string s = ss.str();
-  // Prefer the shortest form that reads back the same.
-  for (int p = 6; p < 17; ++p) {
-    std::ostringstream t;
-    t << std::setprecision(p) << v;
-    if (std::stod(t.str()) == v) return t.str();
-  }
-  return s;
-}
-std::string formatNumber(float v) {
-  for (int p = 6; p < 9; ++p) {
-    std::ostringstream t;
-    t << std::setprecision(p) << v;
-    if (std::stof(t.str()) == v) return t.str();
-  }
-  return formatNumber(static_cast<double>(v));
-}
 
 std::string compressionName(Imf::Compression c) {
   switch (c) {
@@ -264,12 +252,12 @@ std::string compressionName(Imf::Compression c) {
 
 struct AttributeText {
   std::string operator()(int v) const { return std::to_string(v); }
-  std::string operator()(float v) const { return formatNumber(v); }
-  std::string operator()(double v) const { return formatNumber(v); }
+  std::string operator()(float v) const { return numberText(v); }
+  std::string operator()(double v) const { return numberText(v); }
   std::string operator()(const std::string& v) const { return "\"" + v + "\""; }
   std::string operator()(const std::vector<float>& v) const {
     std::string s = "[";
-    for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + formatNumber(v[i]);
+    for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + numberText(v[i]);
     return s + "]";
   }
   std::string operator()(const std::vector<std::string>& v) const {
@@ -282,7 +270,7 @@ struct AttributeText {
     std::string s = "(";
     for (int i = 0; i < N; ++i) {
       if constexpr (std::is_integral_v<T>) s += (i ? ", " : "") + std::to_string(v[i]);
-      else s += (i ? ", " : "") + formatNumber(v[i]);
+      else s += (i ? ", " : "") + numberText(v[i]);
     }
     return s + ")";
   }
@@ -308,10 +296,10 @@ std::string describeAttribute(const Imf::Attribute& a) {
     return std::to_string(v->value().n) + "/" + std::to_string(v->value().d);
   if (auto* v = as<Imf::ChromaticitiesAttribute>(a)) {
     const auto& c = v->value();
-    return "red (" + formatNumber(c.red.x) + ", " + formatNumber(c.red.y) + "), green (" +
-           formatNumber(c.green.x) + ", " + formatNumber(c.green.y) + "), blue (" +
-           formatNumber(c.blue.x) + ", " + formatNumber(c.blue.y) + "), white (" +
-           formatNumber(c.white.x) + ", " + formatNumber(c.white.y) + ")";
+    return "red (" + numberText(c.red.x) + ", " + numberText(c.red.y) + "), green (" +
+           numberText(c.green.x) + ", " + numberText(c.green.y) + "), blue (" +
+           numberText(c.blue.x) + ", " + numberText(c.blue.y) + "), white (" +
+           numberText(c.white.x) + ", " + numberText(c.white.y) + ")";
   }
   return "(" + std::string(a.typeName()) + " value)";
 }
@@ -601,8 +589,8 @@ std::string toText(const ExrFileInfo& info) {
   for (const auto& c : info.channels) {
     out << "    " << std::left << std::setw(int(w)) << c.name << "  " << std::setw(5) << c.pixel_type;
     if (c.finite_count)
-      out << "  min " << formatNumber(c.min) << "  max " << formatNumber(c.max) << "  mean "
-          << formatNumber(c.mean);
+      out << "  min " << numberText(c.min) << "  max " << numberText(c.max) << "  mean "
+          << numberText(c.mean);
     else
       out << "  no finite values";
     out << "  non-finite " << c.nonfinite_count << "\n";

@@ -71,9 +71,14 @@ struct ExrReadOptions {
   bool allow_nonfinite = true;
 };
 
-// Reads every layer. Errors (InputError): missing file, not an EXR file, truncated file,
-// data window not starting at (0, 0), unsupported pixel type (UINT) or channel layout,
-// non-finite values when forbidden, deep data.
+// A file whose pixels would take more than this many times its size is refused as corrupt before
+// anything is allocated. No lossless EXR codec comes near it (zlib's limit is about 1032:1).
+inline constexpr double kMaxExrCompressionRatio = 4096;
+
+// Reads every layer. Errors (InputError): missing file or not a regular file, not an EXR file,
+// truncated file, a data window larger than the file can hold (kMaxExrCompressionRatio) or not
+// starting at (0, 0), unsupported pixel type (UINT) or channel layout, non-finite values when
+// forbidden, deep data.
 ExrImage readExr(const std::filesystem::path& path, const ExrReadOptions& options = {});
 // Reads one layer ("" = the main layer); InputError naming the available layers when absent.
 cv::Mat readExrLayer(const std::filesystem::path& path, const std::string& layer,

@@ -233,6 +233,29 @@ TEST(Exr, DescribeGivesStatisticsAndAttributes) {
   EXPECT_NE(toText(info).find("flarekit.angle_deg (double): 2.5"), std::string::npos);
 }
 
+// A header that claims more pixels than its file could hold is refused before any allocation.
+TEST(Exr, DataWindowLargerThanTheFileIsCorrupt) {
+  TempDir dir;
+  {
+    Imf::Header h(20000, 20000);  // float: 1.6 GB
+    h.channels().insert("Y", Imf::Channel(Imf::FLOAT));
+    Imf::OutputFile out((dir / "big.exr").c_str(), h);  // header and offsets only: pixels never written
+  }
+  expectInputError([&] { readExr(dir / "big.exr"); }, dir / "big.exr",
+                   "corrupt header: its data window (20000 x 20000 pixels) cannot fit in a file of");
+  expectInputError([&] { describeExr(dir / "big.exr"); }, dir / "big.exr", "corrupt header");
+}
+
+// Attributes print as the shortest text that reads back, subnormal numbers too.
+TEST(Exr, DescribesSubnormalAndNonFiniteAttributes) {
+  TempDir dir;
+  writeExr(dir / "a.exr", cv::Mat(2, 2, CV_32F, cv::Scalar(1)),
+           {{"tiny", 4.9406564584124654e-324}, {"huge", std::numeric_limits<double>::infinity()}});
+  const std::string text = toText(describeExr(dir / "a.exr"));
+  EXPECT_NE(text.find("tiny (double): 5e-324"), std::string::npos) << text;
+  EXPECT_NE(text.find("huge (double): inf"), std::string::npos) << text;
+}
+
 TEST(Exr, DefaultOptionsAreValid) {
   std::string why;
   EXPECT_TRUE(ExrWriteOptions{}.IsValid(&why)) << why;

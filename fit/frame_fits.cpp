@@ -24,7 +24,10 @@ FrameFits FrameFits::fromResult(const FitResult& result, cv::Size image_size, in
 }
 
 FrameFits FrameFits::parse(const std::string& text, const std::string& file) {
-  const ConfigNode root = parseJson(text, file);
+  return fromJson(parseJson(text, file));
+}
+
+FrameFits FrameFits::fromJson(const ConfigNode& root) {
   checkFormat(root, kFrameFitsFormat, kFrameFitsVersion);
   root.checkKnownKeys({"format", "version", "image_width", "image_height", "channels", "frames"});
   FrameFits f;
@@ -78,8 +81,7 @@ FrameFits FrameFits::parse(const std::string& text, const std::string& file) {
 }
 
 FrameFits FrameFits::load(const std::filesystem::path& path) {
-  const ConfigNode root = loadJsonFile(path);
-  return parse(root.json().dump(), path.string());
+  return fromJson(loadJsonFile(path));
 }
 
 nlohmann::json FrameFits::toJson() const {

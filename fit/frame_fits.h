@@ -48,6 +48,7 @@ struct FrameFits {
   // InputError naming the file and key on a malformed file.
   static FrameFits load(const std::filesystem::path& path);
   static FrameFits parse(const std::string& text, const std::string& file);
+  static FrameFits fromJson(const ConfigNode& root);
   nlohmann::json toJson() const;
   void save(const std::filesystem::path& path) const;  // atomically
 

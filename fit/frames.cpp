@@ -220,7 +220,7 @@ FrameStack loadCapture(const fs::path& folder, const FrameLoadOptions& options) 
     }
   }
   if (auto light = root.find("light"); light && !light->isNull())
-    info.light = light->isObject() ? light->json().dump() : light->string();
+    info.light = light->isObject() ? jsonText(light->json(), -1) : light->string();
   ConfigNode image = root["image"];
   const int width = static_cast<int>(image["width"].integer());
   const int height = static_cast<int>(image["height"].integer());

@@ -201,8 +201,11 @@ double Polynomial::evaluate(double theta) const {
   return v;
 }
 
-FlareModel FlareModel::parse(const std::string& text_in, const std::string& file) {
-  const ConfigNode root = parseJson(text_in, file);
+FlareModel FlareModel::parse(const std::string& text, const std::string& file) {
+  return fromJson(parseJson(text, file));
+}
+
+FlareModel FlareModel::fromJson(const ConfigNode& root) {
   checkFormat(root, kFlareModelFormat, kFlareModelVersion);
   root.checkKnownKeys({"format", "version", "capture", "channels", "ghosts", "pedestal"});
   FlareModel m;
@@ -224,8 +227,7 @@ FlareModel FlareModel::parse(const std::string& text_in, const std::string& file
 }
 
 FlareModel FlareModel::load(const std::filesystem::path& path) {
-  const ConfigNode root = loadJsonFile(path);
-  return parse(root.json().dump(), path.string());
+  return fromJson(loadJsonFile(path));
 }
 
 bool FlareModel::IsValid(std::string* error) const {

@@ -44,6 +44,10 @@
 #include "model/model_renderer.h"
 #include "model/pedestal.h"
 
+namespace flarekit {
+class ConfigNode;  // common/config.h
+}
+
 namespace flarekit::model {
 
 inline constexpr char kFlareModelFormat[] = "flarekit.flare-model";
@@ -142,6 +146,8 @@ class FlareModel {
   static FlareModel load(const std::filesystem::path& path);
   // Parses the JSON text of a model file; `file` names it in errors.
   static FlareModel parse(const std::string& text, const std::string& file);
+  // The same, from a parsed document (its file and key paths name errors).
+  static FlareModel fromJson(const ConfigNode& root);
 
   // Writes the model atomically. Throws std::invalid_argument if !IsValid(), RuntimeError on I/O.
   void save(const std::filesystem::path& path) const;

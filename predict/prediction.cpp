@@ -1,5 +1,7 @@
 #include "predict/prediction.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -363,29 +365,43 @@ PredictionSummary analyze(const model::FlareModel& m, const Scene& scene, const 
 
 PredictionSummary predict(const model::FlareModel& m, const Scene& scene, const PredictOptions& options,
                           const std::filesystem::path& out_dir, const std::filesystem::path& model_file) {
+  createFolder(out_dir);  // before the work, so a wrong --out fails at once
   cv::Mat overlay, composite;
   PredictionSummary s = analyze(m, scene, options, &overlay, &composite);
   const auto start = std::chrono::steady_clock::now();
   s.model_file = model_file;
   s.out_dir = out_dir;
+  namespace fs = std::filesystem;
+  const std::vector<std::string> names = {"overlay.exr", "composite.png", "estimators.json", "report.html"};
+  for (const auto& name : names) s.files.push_back(out_dir / name);
   std::error_code ec;
-  std::filesystem::create_directories(out_dir, ec);
-  if (ec) throw RuntimeError("cannot create " + out_dir.string() + ": " + ec.message());
 
-  ExrAttributes attributes;
-  attributes["flarekit.scene"] = scene.file.string();
-  attributes["flarekit.model"] = model_file.string();
-  attributes["flarekit.f_number"] = scene.camera.f_number;
-  attributes["flarekit.iso"] = scene.camera.iso;
-  attributes["flarekit.exposure_s"] = scene.camera.exposure_s;
-  writeExr(out_dir / "overlay.exr", overlay, attributes);
-  s.files.push_back(out_dir / "overlay.exr");
-  writePreviewPng(out_dir / "composite.png", composite);
-  s.files.push_back(out_dir / "composite.png");
-  s.files.push_back(out_dir / "estimators.json");
-  s.files.push_back(out_dir / "report.html");
-  writeJsonFile(out_dir / "estimators.json", toJson(s));
-  writeTextFileAtomically(out_dir / "report.html", reportHtml(s, m, scene, composite, overlay));
+  // The files are made in a staging folder inside out_dir and moved in only when all are whole:
+  // a failure on the way (a full disk, an interrupt) leaves out_dir as it was.
+  const fs::path staging = out_dir / (".predict.tmp-" + std::to_string(::getpid()));
+  fs::remove_all(staging, ec);
+  if (!fs::create_directory(staging, ec))
+    throw RuntimeError("cannot write in " + out_dir.string() + ": " + ec.message() + " (is it writable?)");
+  try {
+    ExrAttributes attributes;
+    attributes["flarekit.scene"] = scene.file.string();
+    attributes["flarekit.model"] = model_file.string();
+    attributes["flarekit.f_number"] = scene.camera.f_number;
+    attributes["flarekit.iso"] = scene.camera.iso;
+    attributes["flarekit.exposure_s"] = scene.camera.exposure_s;
+    writeExr(staging / names[0], overlay, attributes);
+    writePreviewPng(staging / names[1], composite);
+    writeJsonFile(staging / names[2], toJson(s));
+    writeTextFileAtomically(staging / names[3], reportHtml(s, m, scene, composite, overlay));
+    for (const auto& name : names) {
+      fs::rename(staging / name, out_dir / name, ec);
+      if (ec) throw RuntimeError("cannot move " + name + " into " + out_dir.string() + ": " + ec.message());
+    }
+  } catch (...) {
+    fs::remove_all(staging, ec);
+    throw;
+  }
+  fs::remove(staging, ec);
   s.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return s;
 }

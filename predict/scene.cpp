@@ -6,7 +6,7 @@
 
 #include <tiny_gltf.h>
 
-#include "common/atomic_file.h"
+#include "common/input_file.h"
 #include "common/config.h"
 #include "common/error.h"
 #include "common/exr.h"
@@ -27,7 +27,7 @@ Vec3 readVec3(const ConfigNode& node) {
 double positive(const ConfigNode& parent, std::string_view key) {
   const ConfigNode n = parent[key];
   const double v = n.number();
-  if (!(v > 0)) n.fail("must be positive, got " + n.json().dump());
+  if (!(v > 0)) n.fail("must be positive, got " + jsonText(n.json(), -1));
   return v;
 }
 
@@ -251,17 +251,39 @@ double extraNumber(const tinygltf::Value& extras, const std::string& key, const 
   return v.GetNumberAsDouble();
 }
 
+// tinygltf reads the buffers and images a glTF file names through this, so they obey the rules of
+// every input (regular files of bounded size).
+bool readReferencedFile(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+  try {
+    const std::string bytes = readInputFile(path);
+    out->assign(bytes.begin(), bytes.end());
+    return true;
+  } catch (const InputError& e) {
+    if (err) *err += e.what();
+    return false;
+  }
+}
+
 }  // namespace
 
 Scene loadGltfScene(const std::filesystem::path& path) {
   const std::string file = path.string();
-  if (!std::filesystem::is_regular_file(path)) throw InputError(file, "cannot read the file");
+  const std::string bytes = readInputFile(path);
   tinygltf::TinyGLTF loader;
+  loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &readReferencedFile,
+                         &tinygltf::WriteWholeFile, nullptr});
   tinygltf::Model m;
   std::string err, warn;
-  const bool binary = path.extension() == ".glb";
-  const bool ok = binary ? loader.LoadBinaryFromFile(&m, &err, &warn, file)
-                         : loader.LoadASCIIFromFile(&m, &err, &warn, file);
+  const std::string base_dir = path.parent_path().string();
+  bool ok = false;
+  if (path.extension() == ".glb") {
+    ok = loader.LoadBinaryFromMemory(&m, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
+                                     static_cast<unsigned int>(bytes.size()), base_dir);
+  } else {
+    checkJsonDepth(bytes, file);
+    ok = loader.LoadASCIIFromString(&m, &err, &warn, bytes.data(), static_cast<unsigned int>(bytes.size()),
+                                    base_dir);
+  }
   if (!ok) throw InputError(file, "not a readable glTF 2.0 file: " + (err.empty() ? warn : err));
 
   // World matrices of every node reachable from the scene's roots (all roots when no scene).
@@ -386,7 +408,7 @@ Scene loadScene(const std::filesystem::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
   if (ext == ".gltf" || ext == ".glb") return loadGltfScene(path);
-  return parseSceneJson(readTextFile(path), path);
+  return parseSceneJson(readInputFile(path), path);
 }
 
 }  // namespace flarekit::predict

@@ -4,7 +4,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "common/atomic_file.h"
+#include "common/input_file.h"
 #include "common/config.h"
 #include "common/error.h"
 #include "render/paraxial.h"
@@ -201,7 +201,7 @@ Lens parsePbrtLens(std::string_view text, const std::string& file) {
 }
 
 Lens loadLens(const std::filesystem::path& path) {
-  const std::string text = readTextFile(path);
+  const std::string text = readInputFile(path);
   const std::string ext = path.extension().string();
   Lens lens = (ext == ".dat") ? parsePbrtLens(text, path.string()) : parseLensJson(text, path.string());
   lens.file = path;
@@ -224,9 +224,19 @@ void validateLens(const Lens& lens, const std::string& file) {
     const bool last = i + 1 == lens.surfaces.size();
     if (s.thickness_mm < 0 || (!last && s.thickness_mm == 0))
       fail("thickness must be positive, got " + std::to_string(s.thickness_mm));
-    if (s.ior_d < 1.0) fail("ior must be at least 1, got " + std::to_string(s.ior_d));
-    if (s.abbe_d && (!finite(*s.abbe_d) || *s.abbe_d <= 0))
-      fail("abbe must be a positive number");
+    if (!(s.ior_d >= kMinRefractiveIndex && s.ior_d <= kMaxRefractiveIndex))
+      fail("ior must be in [" + numberText(kMinRefractiveIndex) + ", " + numberText(kMaxRefractiveIndex) + "], got " +
+           numberText(s.ior_d));
+    if (s.abbe_d && !(*s.abbe_d >= kMinAbbeNumber && *s.abbe_d <= kMaxAbbeNumber))
+      fail("abbe must be in [" + numberText(kMinAbbeNumber) + ", " + numberText(kMaxAbbeNumber) + "], got " +
+           numberText(*s.abbe_d));
+    if (std::abs(s.radius_mm) > kMaxRadiusMm)
+      fail("|radius| must be at most " + numberText(kMaxRadiusMm) + " mm (write 0 for a flat surface), got " +
+           numberText(s.radius_mm));
+    if (s.thickness_mm > kMaxLengthMm)
+      fail("thickness must be at most " + numberText(kMaxLengthMm) + " mm, got " + numberText(s.thickness_mm));
+    if (s.semi_aperture_mm > kMaxLengthMm)
+      fail("semi_aperture must be at most " + numberText(kMaxLengthMm) + " mm, got " + numberText(s.semi_aperture_mm));
     if (!(s.semi_aperture_mm > 0))
       fail("semi_aperture must be > 0, got " + std::to_string(s.semi_aperture_mm));
     if (s.radius_mm != 0 && s.semi_aperture_mm >= std::abs(s.radius_mm))
@@ -234,10 +244,15 @@ void validateLens(const Lens& lens, const std::string& file) {
            " mm is not below |radius| " + std::to_string(std::abs(s.radius_mm)) + " mm");
     if (s.coating_nm && !(*s.coating_nm > 0 && *s.coating_nm < 10000))
       fail("coating_nm must be in (0, 10000) nm");
-    if (s.sellmeier)
+    if (s.sellmeier) {
       for (int k = 0; k < 3; ++k)
         if (!finite(s.sellmeier->b[k]) || !finite(s.sellmeier->c_um2[k]))
           fail("sellmeier coefficients must be finite");
+      const double n_d = lens.refractiveIndex(static_cast<int>(i), 587.56);
+      if (!(n_d >= kMinRefractiveIndex && n_d <= kMaxRefractiveIndex))
+        fail("sellmeier coefficients give n = " + numberText(n_d) + " at 587.56 nm, outside [" +
+             numberText(kMinRefractiveIndex) + ", " + numberText(kMaxRefractiveIndex) + "]");
+    }
     if (s.is_stop) {
       ++stops;
       if (s.radius_mm != 0) fail("the stop must be flat (radius 0)");
@@ -249,10 +264,11 @@ void validateLens(const Lens& lens, const std::string& file) {
   if (stops > 1) throw InputError(file, "surfaces: " + std::to_string(stops) + " stops, expected exactly one");
   if (lens.surfaces.back().ior_d != 1.0)
     throw InputError(file, surfaceName(lens.surfaces.size() - 1) + ": the last medium must be air (ior 1)");
-  if (!finite(lens.sensor_distance_mm))
-    throw InputError(file, "sensor_distance_mm is not a finite number");
-  if (lens.coating_ior && !(*lens.coating_ior >= 1.0 && finite(*lens.coating_ior)))
-    throw InputError(file, "coating_ior must be a finite number ≥ 1");
+  if (!finite(lens.sensor_distance_mm) || lens.sensor_distance_mm > kMaxLengthMm)
+    throw InputError(file, "sensor_distance_mm must be a finite number of at most " + numberText(kMaxLengthMm) + " mm");
+  if (lens.coating_ior && !(*lens.coating_ior >= kMinRefractiveIndex && *lens.coating_ior <= kMaxRefractiveIndex))
+    throw InputError(file, "coating_ior must be in [" + numberText(kMinRefractiveIndex) + ", " +
+                               numberText(kMaxRefractiveIndex) + "]");
 }
 
 ParaxialProperties paraxialProperties(const Lens& lens, double wavelength_nm) {

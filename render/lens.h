@@ -97,11 +97,22 @@ Lens parseLensJson(std::string_view text, const std::string& file);
 // the sensor when non-zero, else the paraxial back focal distance is used.
 Lens parsePbrtLens(std::string_view text, const std::string& file);
 
+// Physical ranges of a prescription's values. Optical glasses and crystals for visible light have
+// 1.3 < n_d < 2.2 and 17 < V_d < 96; the ranges leave room and keep the tracer's arithmetic far
+// from overflow. A flatter surface than kMaxRadiusMm is written as radius 0.
+inline constexpr double kMinRefractiveIndex = 1.0;
+inline constexpr double kMaxRefractiveIndex = 3.0;
+inline constexpr double kMinAbbeNumber = 5.0;
+inline constexpr double kMaxAbbeNumber = 150.0;
+inline constexpr double kMaxRadiusMm = 1e6;
+inline constexpr double kMaxLengthMm = 1e4;  // thickness, semi-aperture, sensor distance
+
 // Checks the prescription: at least two surfaces, exactly one stop (flat, ior 1), positive
 // thicknesses (the last may be 0 when the sensor distance comes from elsewhere), semi-apertures
-// > 0 and below |radius| for curved surfaces, finite numbers, indices ≥ 1, Abbe numbers > 0,
-// coating wavelengths in (0, 10000) nm, sensor distance > 0. Throws InputError naming `file`,
-// the surface and the problem.
+// > 0 and below |radius| for curved surfaces, finite numbers, indices (also a Sellmeier glass's
+// at 587.56 nm and a coating's) and Abbe numbers in the physical ranges above, radii and lengths
+// within them, coating wavelengths in (0, 10000) nm, sensor distance > 0. Throws InputError
+// naming `file`, the surface and the problem.
 void validateLens(const Lens& lens, const std::string& file);
 
 // First-order (paraxial) properties at one wavelength, object at infinity (ABCD matrices with

@@ -170,7 +170,11 @@ INSTANTIATE_TEST_SUITE_P(
         BadLens{"empty surface list", "{\"surfaces\": []}", "empty"},
         BadLens{"surfaces not a list", "{\"surfaces\": 3}", "surfaces"},
         BadLens{"missing surfaces", "{\"name\": \"x\"}", "surfaces"},
-        BadLens{"index below 1", "{\"surfaces\": [" SURF(50, 5, 0.5, 10) "," BACK "," STOP "]}", "ior must be at least 1"},
+        BadLens{"index below 1", "{\"surfaces\": [" SURF(50, 5, 0.5, 10) "," BACK "," STOP "]}", "surfaces[0]: ior must be in [1, 3], got 0.5"},
+        BadLens{"index far above glass", "{\"surfaces\": [" SURF(50, 5, 1e308, 10) "," BACK "," STOP "]}", "surfaces[0]: ior must be in [1, 3], got 1e+308"},
+        BadLens{"Abbe number of no glass", "{\"surfaces\": [{\"radius\": 50, \"thickness\": 5, \"ior\": 1.5, \"abbe\": 1e-300, \"semi_aperture\": 10}," BACK "," STOP "]}", "surfaces[0]: abbe must be in [5, 150], got 1e-300"},
+        BadLens{"radius beyond flat", "{\"surfaces\": [" SURF(1e300, 5, 1.5, 10) "," BACK "," STOP "]}", "surfaces[0]: |radius| must be at most 1e+06 mm (write 0 for a flat surface), got 1e+300"},
+        BadLens{"thickness of a kilometre", "{\"surfaces\": [" SURF(50, 1e6, 1.5, 10) "," BACK "," STOP "]}", "surfaces[0]: thickness must be at most 10000 mm, got 1e+06"},
         BadLens{"glass after the last surface", "{\"surfaces\": [" SURF(50, 5, 1.5, 10) "," BACK "," STOP "," SURF(-50, 40, 1.5, 10) "]}", "last medium"}),
     [](const ::testing::TestParamInfo<BadLens>& info) {
       std::string n = info.param.what;

@@ -3,6 +3,7 @@
 // Ctrl-C, and the HDR merge's accuracy against the renderer's noise-free truth.
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -14,6 +15,7 @@
 #include <fstream>
 #include <random>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -277,21 +279,28 @@ TEST(CliCapture, PersistentFaultExitsOneAndResumeFinishes) {
   expectCompleteCapture(dir / "cap", 11);
 }
 
-TEST(CliCapture, CtrlCStopsAfterTheCurrentFrame) {
+// Ctrl-C stops after the current frame, and the command it prints continues the capture when
+// pasted into a shell (a folder name with a space and a quote included).
+TEST(CliCapture, CtrlCStopsAfterTheCurrentFrameAndThePrintedCommandResumes) {
   TempDir dir;
   const fs::path rig = writeSmallRig(dir, "sigint-test", "", 96, 64);
-  const std::string out = (dir / "cap").string();
-  std::vector<std::string> args = {FLAREKIT_BINARY, "capture", "--rig", rig.string(), "--out", out,
-                                   "--from", "0", "--to", "10", "--step", "0.5", "-q"};
+  const fs::path cap = dir / "cap 'one'";
+  std::vector<std::string> args = {FLAREKIT_BINARY, "capture", "--rig", rig.string(), "--out", cap.string(),
+                                   "--from", "0", "--to", "10", "--step", "0.5", "--exposures", "0.25,2",
+                                   "--dark-frames", "1", "-q"};
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 2, (dir / "stderr.txt").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   pid_t pid = 0;
-  ASSERT_EQ(posix_spawn(&pid, FLAREKIT_BINARY, nullptr, nullptr, argv.data(), environ), 0);
+  ASSERT_EQ(posix_spawn(&pid, FLAREKIT_BINARY, &actions, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&actions);
   // Wait until two frames are done, then Ctrl-C.
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (std::chrono::steady_clock::now() < deadline) {
-    if (fs::exists(dir / "cap/frames/frame_0001.exr")) break;
+    if (fs::exists(cap / "frames/frame_0001.exr")) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   kill(pid, SIGINT);
@@ -299,17 +308,22 @@ TEST(CliCapture, CtrlCStopsAfterTheCurrentFrame) {
   waitpid(pid, &status, 0);
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 130);
-  const auto m = manifestOf(dir / "cap");
+  const auto m = manifestOf(cap);
   EXPECT_EQ(m["status"], "interrupted");
   const size_t done = m["frames"].size();
   EXPECT_GE(done, 2u);
   EXPECT_LT(done, 21u);
-  for (const auto& f : m["frames"]) EXPECT_NO_THROW(readExr(dir / "cap" / f["file"].get<std::string>()));
-  args.erase(args.begin());
-  args.push_back("--resume");
-  auto r = runFlarekit(args);
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  expectCompleteCapture(dir / "cap", 21);
+  for (const auto& f : m["frames"]) EXPECT_NO_THROW(readExr(cap / f["file"].get<std::string>()));
+  std::stringstream err;
+  err << std::ifstream(dir / "stderr.txt").rdbuf();
+  const std::string marker = "continue with: flarekit ";
+  const size_t at = err.str().find(marker);
+  ASSERT_NE(at, std::string::npos) << err.str();
+  std::string command = err.str().substr(at + marker.size());
+  command = command.substr(0, command.find('\n'));
+  auto r = flarekit::testing::runProgram("/bin/sh", {"-c", std::string(FLAREKIT_BINARY) + " " + command});
+  ASSERT_EQ(r.exit_code, 0) << command << "\n" << r.err;
+  expectCompleteCapture(cap, 21);
 }
 
 // The accuracy test on rendered frames (sim-heliar, 320×214): relative error of the merged
