@@ -326,6 +326,36 @@ TEST(CliCapture, CtrlCStopsAfterTheCurrentFrameAndThePrintedCommandResumes) {
   expectCompleteCapture(cap, 21);
 }
 
+// One process per capture folder: a second capture is refused naming the holder, and a holder
+// killed with SIGKILL leaves no lock behind.
+TEST(CliCapture, ASecondCaptureOfAFolderInUseExitsOneAndTheLockDiesWithItsHolder) {
+  TempDir dir;
+  const fs::path rig = writeSmallRig(dir, "lock-test", "", 96, 64);
+  const std::string out = (dir / "cap").string();
+  std::vector<std::string> args = {FLAREKIT_BINARY, "capture", "--rig", rig.string(), "--out", out,
+                                   "--from", "0", "--to", "20", "--step", "0.5", "-q"};
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  ASSERT_EQ(posix_spawn(&pid, FLAREKIT_BINARY, nullptr, nullptr, argv.data(), environ), 0);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < deadline && !fs::exists(dir / "cap/frames/frame_0000.exr"))
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  args.erase(args.begin());
+  args.push_back("--resume");
+  auto second = runFlarekit(args);
+  EXPECT_EQ(second.exit_code, 1) << second.err;
+  EXPECT_EQ(lineCount(second.err), 1) << second.err;
+  EXPECT_NE(second.err.find(out + ": in use by process " + std::to_string(pid)), std::string::npos) << second.err;
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  auto resumed = runFlarekit(args);
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.err;
+  expectCompleteCapture(dir / "cap", 41);
+}
+
 // The accuracy test on rendered frames (sim-heliar, 320×214): relative error of the merged
 // frame against the renderer's noise-free radiance over the photosites with SNR ≥ 10, on frames
 // spanning ≥ 10⁵:1; every photosite saturated in all exposures flagged.

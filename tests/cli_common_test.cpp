@@ -1,6 +1,7 @@
 // The flarekit command as a user meets it: version, help, exr-info, exit codes, and EXR files
 // exchanged with other programs (OpenEXR's own tools, OpenCV).
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -125,6 +126,49 @@ TEST(Cli, BadExrInputsExitTwoWithOneClearLine) {
     EXPECT_NE(r.err.find(c.file), std::string::npos) << r.err;
     EXPECT_NE(r.err.find(c.needle), std::string::npos) << r.err;
   }
+}
+
+// Paths that are not regular files and files that nest without end: every command that reads a
+// text input stops at once (the runs time out after 20 s) with one line naming the path.
+TEST(Cli, InputsThatAreNotFilesOrNestTooDeepExitTwoAtOnce) {
+  TempDir dir;
+  ASSERT_EQ(::mkfifo((dir / "fifo").c_str(), 0600), 0);
+  std::filesystem::create_symlink("loop_b", dir / "loop_a");
+  std::filesystem::create_symlink("loop_a", dir / "loop_b");
+  { std::ofstream(dir / "deep.json") << std::string(100000, '[') << std::string(100000, ']'); }
+  const std::string source = FLAREKIT_SOURCE_DIR;
+  const std::string model = source + "/tests/data/model/example_model.json";
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"/dev/zero", "is not a regular file"},
+      {(dir / "fifo").string(), "is not a regular file"},
+      {(dir / "loop_a").string(), "a loop of symbolic links"},
+      {(dir / "deep.json").string(), "nested deeper than 64 levels"}};
+  for (const auto& [path, needle] : bad) {
+    const std::vector<std::vector<std::string>> commands = {
+        {"model-info", path},
+        {"lens-info", path},
+        {"rig-check", path},
+        {"predict", model, "--scene", path, "--out", (dir / "out").string()}};
+    for (const auto& args : commands) {
+      if (args[0] == "rig-check" && needle.find("nested") != std::string::npos) continue;  // TOML
+      auto r = runFlarekit(args, 20);
+      EXPECT_EQ(r.exit_code, 2) << args[0] << " " << path << ": " << r.err;
+      EXPECT_EQ(lineCount(r.err), 1) << r.err;
+      EXPECT_NE(r.err.find("error: " + path + ":"), std::string::npos) << r.err;
+      EXPECT_NE(r.err.find(needle), std::string::npos) << args[0] << ": " << r.err;
+    }
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "out" / "overlay.exr"));
+}
+
+// A channel name that is not UTF-8 prints as U+FFFD in exr-info --json, which stays valid JSON.
+TEST(Cli, ExrInfoJsonOfANameThatIsNotUtf8) {
+  TempDir dir;
+  writeExr(dir / "y.exr", cv::Mat(4, 4, CV_32FC1, cv::Scalar(1)), {{"note", std::string("caf\xe9")}});
+  auto r = runFlarekit({"exr-info", "--json", (dir / "y.exr").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("caf\xef\xbf\xbd"), std::string::npos) << r.out;
+  EXPECT_NO_THROW(nlohmann::json::parse(r.out));
 }
 
 }  // namespace
