@@ -246,6 +246,24 @@ TEST(Exr, DataWindowLargerThanTheFileIsCorrupt) {
   expectInputError([&] { describeExr(dir / "big.exr"); }, dir / "big.exr", "corrupt header");
 }
 
+// OpenEXR reads an attribute's value whole while opening: a size the file cannot hold is refused first.
+TEST(Exr, AttributeLargerThanTheFileIsCorrupt) {
+  TempDir dir;
+  writeExr(dir / "a.exr", cv::Mat(2, 2, CV_32F, cv::Scalar(1)), {{"note", std::string("hello")}});
+  std::string bytes;
+  {
+    std::ifstream in(dir / "a.exr", std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::string key("note\0string\0", 12);
+  const size_t at = bytes.find(key);
+  ASSERT_NE(at, std::string::npos);
+  bytes.replace(at + key.size(), 4, std::string("\x00\x00\x00\x60", 4));  // 1.6 GB
+  { std::ofstream(dir / "a.exr", std::ios::binary) << bytes; }
+  expectInputError([&] { readExr(dir / "a.exr"); }, dir / "a.exr",
+                   "truncated or corrupt header: attribute 'note' claims 1610612736 bytes, more than the file holds");
+}
+
 // Attributes print as the shortest text that reads back, subnormal numbers too.
 TEST(Exr, DescribesSubnormalAndNonFiniteAttributes) {
   TempDir dir;
