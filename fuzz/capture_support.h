@@ -16,8 +16,9 @@ acquisition::Rig captureRig();
 acquisition::RigDevices captureDevices(const acquisition::Rig& rig);
 acquisition::CapturePlan capturePlan();
 
-// Captures into `dir` (which must not hold a capture). stop_after_frames ≥ 0 interrupts the
-// session after that many frames (status "interrupted"), as Ctrl-C would.
+// Captures into `dir` (which must not hold a capture). stop_after_frames 0 or ≥ 2 interrupts the
+// session after that many frames (status "interrupted"), as Ctrl-C would (1 acts as 0: the dark
+// frames, rendered at 0°, already request the stop).
 void makeSmallCapture(const std::filesystem::path& dir, int stop_after_frames = -1);
 
 }  // namespace flarekit::fuzz

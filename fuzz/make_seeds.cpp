@@ -104,7 +104,7 @@ void captureSeeds(const fs::path& manifest_dir, const fs::path& resume_dir) {
   struct Case {
     const char* name;
     int stop_after;
-  } cases[] = {{"complete.json", -1}, {"interrupted_after_1.json", 1}, {"started.json", 0}};
+  } cases[] = {{"complete.json", -1}, {"interrupted_after_2.json", 2}, {"started.json", 0}};
   for (const Case& c : cases) {
     const fs::path cap = work / c.name;
     fuzz::makeSmallCapture(cap, c.stop_after);
