@@ -11,8 +11,8 @@
 #                 a crash for the whole time and keep every crashing input, to collect findings
 #   TARGET        names as in fuzz/corpus (exr lens_json ...); default: all
 #
-# Prints per target: executions, exec/s, crashes/leaks/timeouts/out-of-memory, the inputs that
-# failed (build-fuzz/fuzz-runs/<target>/artifacts/), and the log. Exit 1 when any target
+# Prints per target: executions, exec/s, crashes/leaks/timeouts/out-of-memory (and slow inputs,
+# over 10 s but under the timeout, which are listed without failing), the inputs that failed (build-fuzz/fuzz-runs/<target>/artifacts/), and the log. Exit 1 when any target
 # failed. Reproduce one input with build-fuzz/bin/<target>_fuzzer <file>, or with the gcc build's
 # replay: build/bin/<target>_fuzzer <file>.
 #
@@ -82,8 +82,8 @@ for t in "${targets[@]}"; do
   status=0
   (cd "$run" && nice -n "$nice_level" "$build/bin/${t}_fuzzer" "${args[@]}" "$run/corpus" \
      >"$run/log" 2>&1) || status=$?
-  execs=$(grep -o 'stat::number_of_executed_units: [0-9]*' "$run/log" | tail -1 | grep -o '[0-9]*$' || true)
-  rate=$(grep -o 'stat::average_exec_per_sec: [0-9]*' "$run/log" | tail -1 | grep -o '[0-9]*$' || true)
+  execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$run/log" | tail -1 | grep -o '[0-9]*$' || true)
+  rate=$(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$run/log" | tail -1 | grep -o '[0-9]*$' || true)
   if [[ -z $execs ]]; then  # fork mode, or killed before the final stats: the last status line
     line=$(grep -E '^#[0-9]+' "$run/log" | tail -1 || true)
     execs=$(sed -E 's/^#([0-9]+).*/\1/' <<<"$line")
@@ -91,14 +91,18 @@ for t in "${targets[@]}"; do
   fi
   count() { find "$run/artifacts" -maxdepth 1 -name "$1-*" | wc -l; }
   crashes=$(count crash) leaks=$(count leak) timeouts=$(count timeout) ooms=$(count oom)
+  slow=$(count slow-unit)  # over 10 s but under -timeout: listed, not a failure
   problems=$((crashes + leaks + timeouts + ooms))
   if ((problems == 0 && status != 0)); then
     # A failure libFuzzer wrote no artifact for (e.g. an error in the harness itself).
     crashes=1 problems=1
   fi
-  line=$(printf '%-17s %10s execs %7s exec/s  crashes %d  leaks %d  timeouts %d  oom %d' \
-         "$t" "${execs:-?}" "${rate:-?}" "$crashes" "$leaks" "$timeouts" "$ooms")
+  line=$(printf '%-17s %10s execs %6s exec/s  crashes %d  leaks %d  timeouts %d  oom %d  slow %d' \
+         "$t" "${execs:-?}" "${rate:-?}" "$crashes" "$leaks" "$timeouts" "$ooms" "$slow")
   summary+=("$line")
+  if ((slow && !problems)); then
+    while IFS= read -r f; do summary+=("    slow: $f"); done < <(find "$run/artifacts" -maxdepth 1 -name 'slow-unit-*' | sort)
+  fi
   if ((problems)); then
     failed=1
     while IFS= read -r f; do summary+=("    $f"); done < <(find "$run/artifacts" -maxdepth 1 -type f | sort)
