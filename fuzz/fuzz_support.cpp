@@ -1,6 +1,9 @@
 #include "fuzz/fuzz_support.h"
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <cstdlib>
 #include <fstream>
@@ -14,10 +17,25 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// Scratch folders of processes that are gone (a crash or a killed fork-mode job skips atexit).
+void removeStaleScratchDirs(const fs::path& base) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(base, ec)) {
+    const std::string name = e.path().filename().string();
+    const std::string prefix = "flarekit-fuzz-";
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string digits = name.substr(prefix.size());
+    if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+    const long pid = std::stol(digits);
+    if (::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH) fs::remove_all(e.path(), ec);
+  }
+}
+
 fs::path makeScratchDir() {
   std::error_code ec;
   fs::path base = "/dev/shm";
   if (!fs::is_directory(base, ec)) base = fs::temp_directory_path();
+  removeStaleScratchDirs(base);
   fs::path dir = base / ("flarekit-fuzz-" + std::to_string(::getpid()));
   fs::remove_all(dir, ec);
   fs::create_directories(dir);

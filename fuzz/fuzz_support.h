@@ -18,7 +18,8 @@
 namespace flarekit::fuzz {
 
 // This process's scratch folder, /dev/shm/flarekit-fuzz-<pid> (created on first use, removed at
-// exit). Falls back to the system temporary folder when /dev/shm is absent.
+// exit; those of processes that died without exiting are removed when the next one starts).
+// Falls back to the system temporary folder when /dev/shm is absent.
 const std::filesystem::path& scratchDir();
 
 // Writes the bytes to scratchDir()/name (replacing it) and returns the path.
