@@ -45,7 +45,11 @@ TransferWeights transferWeights(double d, const GhostParameters& g, bool with_de
 
 // One clone per instruction set, chosen when the program loads (the vector code is the same; the
 // file has no fused multiply-adds, model/CMakeLists.txt, so every clone gives the same bits).
+// Clang (the fuzzing build, scripts/fuzz.sh) refuses the clone's calls of the vector helpers
+// (AVX vector arguments without AVX in the callee): one portable version there.
+#if !defined(__clang__)
 __attribute__((target_clones("avx2", "default")))
+#endif
 void transferValueWeights(const double* d, int count, const GhostParameters& g, double* border,
                           double* inside) {
   using detail::Double4;

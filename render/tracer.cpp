@@ -103,7 +103,13 @@ constexpr double kValidityScale = 4.0;
 // load time by the CPU. The library is built with -ffp-contract=off, so no clone fuses a multiply
 // and an add: every clone performs the same IEEE operations and images do not depend on the
 // machine.
+#if defined(__clang__)
+// Clang (the fuzzing build, scripts/fuzz.sh) does not clone templates nor know arch=x86-64-v4 in
+// function multiversioning: one portable version there.
+#define FLAREKIT_VECTOR_LOOP
+#else
 #define FLAREKIT_VECTOR_LOOP __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#endif
 
 // Lane flags are doubles (1 = set) so that the masks have the width of the data they select.
 struct Block {
@@ -268,6 +274,11 @@ __attribute__((always_inline)) inline void lookupReflectanceLoops(const float* _
   }
 }
 
+#if defined(__clang__)
+void lookupReflectance(const float* __restrict__ table, Block& b, int count) {
+  lookupReflectanceLoops(table, b, count);
+}
+#else
 __attribute__((target("default"))) void lookupReflectance(const float* __restrict__ table,
                                                           Block& b, int count) {
   lookupReflectanceLoops(table, b, count);
@@ -330,6 +341,7 @@ __attribute__((target("arch=x86-64-v4"))) void lookupReflectance(const float* __
     }
   }
 }
+#endif  // !__clang__
 
 FLAREKIT_VECTOR_LOOP void reflect(Block& b, int count) {
 #pragma GCC ivdep

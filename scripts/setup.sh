@@ -27,6 +27,7 @@ packages=(
   libtinygltf-dev                             # glTF scenes (predict/)
   chromium                                    # the report's browser test (predict/)
   jq                                          # bench/fit_accuracy.sh
+  clang libclang-rt-14-dev                    # scripts/fuzz.sh (libFuzzer, ASan/UBSan runtimes)
 )
 
 missing=()
