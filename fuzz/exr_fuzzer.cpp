@@ -6,6 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/config.h"
 #include "common/exr.h"
 #include "fuzz/fuzz_support.h"
 
@@ -29,7 +30,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   fuzz::expectFlareKitErrors([&] {
     const ExrFileInfo info = describeExr(path);
     (void)toText(info);
-    (void)toJson(info).dump();  // what exr-info --json prints
+    (void)jsonText(toJson(info));  // what exr-info --json prints
   });
   return 0;
 }

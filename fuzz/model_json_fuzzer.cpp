@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "common/config.h"
 #include "fuzz/fuzz_support.h"
 #include "model/flare_model.h"
 
@@ -22,7 +23,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto path = fuzz::writeScratchFile("model.json", data, size);
   fuzz::expectFlareKitErrors([&] {
     const model::FlareModel m = model::FlareModel::load(path);
-    (void)m.toJson().dump();
+    (void)jsonText(m.toJson());
     std::vector<double> angles{0.0};
     for (const auto& g : m.ghosts) {
       angles.push_back(g.angle_min_deg);
