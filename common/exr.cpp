@@ -26,8 +26,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
-#include <fstream>
 #include <iomanip>
 #include <limits>
 #include <memory>
@@ -38,6 +36,7 @@
 
 #include "common/atomic_file.h"
 #include "common/error.h"
+#include "common/exr_header_check.h"
 #include "common/input_file.h"
 
 namespace flarekit {
@@ -131,44 +130,6 @@ std::vector<LayerLayout> layoutOf(const fs::path& path, const Imf::ChannelList& 
   return layouts;
 }
 
-// Walks the header's attributes (name, type, 4-byte size, value; an empty name ends a header,
-// an empty header ends a multi-part file's headers) and refuses a size larger than what follows
-// in the file. OpenEXR allocates and reads an attribute's value whole while opening, so a
-// damaged size would otherwise cost gigabytes before any error.
-void checkExrAttributeSizes(const fs::path& path, std::uintmax_t file_bytes) {
-  std::ifstream in(path, std::ios::binary);
-  char version[4];
-  in.seekg(4);
-  if (!in.read(version, 4)) return;  // OpenEXR names the truncation
-  const bool multipart = (static_cast<unsigned char>(version[1]) & 0x10) != 0;
-  auto readText = [&](std::string& text) {
-    text.clear();
-    for (char c; in.get(c) && c != '\0';)
-      if (text.size() < 256) text += c;
-    return static_cast<bool>(in);
-  };
-  for (int header = 0;; ++header) {
-    int attributes = 0;
-    for (std::string name, type;; ++attributes) {
-      if (!readText(name)) return;
-      if (name.empty()) break;
-      char size_bytes[4];
-      if (!readText(type) || !in.read(size_bytes, 4)) return;
-      const std::int64_t size = static_cast<std::int32_t>(
-          static_cast<std::uint32_t>(static_cast<unsigned char>(size_bytes[0])) |
-          static_cast<std::uint32_t>(static_cast<unsigned char>(size_bytes[1])) << 8 |
-          static_cast<std::uint32_t>(static_cast<unsigned char>(size_bytes[2])) << 16 |
-          static_cast<std::uint32_t>(static_cast<unsigned char>(size_bytes[3])) << 24);
-      const std::int64_t left = static_cast<std::int64_t>(file_bytes) - static_cast<std::int64_t>(in.tellg());
-      if (size < 0 || size > left)
-        throw InputError(path.string(), "truncated or corrupt header: attribute '" + oneLine(name) + "' claims " +
-                                            std::to_string(size) + " bytes, more than the file holds");
-      in.seekg(size, std::ios::cur);
-    }
-    if (!multipart || attributes == 0) return;
-  }
-}
-
 // Opens an EXR file for reading with every check that does not need the pixels.
 std::unique_ptr<Imf::InputFile> openExr(const fs::path& path) {
   const std::uintmax_t file_bytes = checkInputFile(path);
@@ -176,7 +137,7 @@ std::unique_ptr<Imf::InputFile> openExr(const fs::path& path) {
   if (!Imf::isOpenExrFile(path.c_str(), tiled, deep, multipart))
     throw InputError(path.string(), "not an OpenEXR file (no EXR magic number)");
   if (deep) throw InputError(path.string(), "holds deep data; FlareKit reads flat images only");
-  checkExrAttributeSizes(path, file_bytes);
+  detail::checkExrHeaderSizes(path, file_bytes);
   std::unique_ptr<Imf::InputFile> file;
   try {
     file = std::make_unique<Imf::InputFile>(path.c_str());

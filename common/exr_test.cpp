@@ -264,6 +264,16 @@ TEST(Exr, AttributeLargerThanTheFileIsCorrupt) {
                    "truncated or corrupt header: attribute 'note' claims 1610612736 bytes, more than the file holds");
 }
 
+// OpenEXR reads a channel list record by record, not by its declared size; the check follows it
+// there and finds the 1.8 GB attribute after it (inputs found by fuzz/exr_fuzzer).
+TEST(Exr, AttributeAfterAChannelListLongerThanItsSizeIsChecked) {
+  for (const char* name : {"exr/regression_channel_list_longer_than_its_size.exr",
+                           "exr_stack/regression_channel_list_longer_than_its_size.exr"}) {
+    const std::filesystem::path file = std::filesystem::path(FLAREKIT_SOURCE_DIR) / "fuzz/corpus" / name;
+    expectInputError([&] { readExr(file); }, file, "truncated or corrupt header: attribute '");
+  }
+}
+
 // Attributes print as the shortest text that reads back, subnormal numbers too.
 TEST(Exr, DescribesSubnormalAndNonFiniteAttributes) {
   TempDir dir;
