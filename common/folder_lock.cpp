@@ -29,10 +29,9 @@ FolderLock::FolderLock(const std::filesystem::path& folder) {
     throw RuntimeError(folder.string() + ": in use by process " + oneLine(pid) +
                        "; wait for it to finish or stop it");
   }
+  // Who holds it, for the message a second process gives (without it, that one says "unknown").
   const std::string pid = std::to_string(::getpid());
-  if (::ftruncate(fd_, 0) != 0 || ::pwrite(fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
-    // The lock holds without the note of who holds it; a second process then reports "unknown".
-  }
+  if (::ftruncate(fd_, 0) == 0) (void)!::pwrite(fd_, pid.data(), pid.size(), 0);
 }
 
 FolderLock::~FolderLock() {
