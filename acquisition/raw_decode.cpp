@@ -1,6 +1,7 @@
 #include "acquisition/raw_decode.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -99,10 +100,40 @@ bool isLinearImageFile(const std::filesystem::path& path) {
   return ext == ".tif" || ext == ".tiff" || ext == ".png";
 }
 
+namespace {
+
+// OpenCV's imread tries every decoder it has (DICOM, GDAL, …) on what it does not recognize; only
+// PNG and TIFF hold linear 16-bit frames, so other content is refused before it reaches them. A
+// PNG's header size is held to what zlib (at most about 1032:1) can have packed into the file.
+void checkPngOrTiff(const std::filesystem::path& path, const std::string& bytes) {
+  static const std::string png("\x89PNG\r\n\x1a\n", 8);
+  const std::string head = bytes.substr(0, 8);
+  if (head.rfind(png, 0) == 0) {
+    if (bytes.size() < 24) throw InputError(path.string(), "truncated PNG header");
+    auto be32 = [&](size_t at) {
+      return std::uint32_t(std::uint8_t(bytes[at])) << 24 | std::uint32_t(std::uint8_t(bytes[at + 1])) << 16 |
+             std::uint32_t(std::uint8_t(bytes[at + 2])) << 8 | std::uint32_t(std::uint8_t(bytes[at + 3]));
+    };
+    const double pixels = double(be32(16)) * double(be32(20));
+    if (pixels * 8 > double(bytes.size()) * 1032)  // 8 bytes: the widest PNG pixel (16-bit RGBA)
+      throw InputError(path.string(), "corrupt PNG header: " + std::to_string(be32(16)) + " x " +
+                                          std::to_string(be32(20)) + " pixels cannot fit in a file of " +
+                                          std::to_string(bytes.size()) + " bytes");
+    return;
+  }
+  for (const char* tiff : {"II*\0", "MM\0*", "II+\0", "MM\0+"})
+    if (head.compare(0, 4, std::string(tiff, 4)) == 0) return;
+  throw InputError(path.string(), "not a PNG or TIFF file");
+}
+
+}  // namespace
+
 RawFrame loadLinearImage(const std::filesystem::path& path, double exposure_s, double black_level,
                          double white_level, Cfa cfa) {
-  checkInputFile(path);
-  cv::Mat m = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  const std::string bytes = readInputFile(path, kMaxRawFileBytes);
+  checkPngOrTiff(path, bytes);
+  cv::Mat m = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data())),
+                           cv::IMREAD_UNCHANGED);
   if (m.empty()) throw InputError(path.string(), "not an image OpenCV can read");
   if (m.depth() != CV_16U)
     throw InputError(path.string(), "must hold 16-bit linear values (this one is " +

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <iterator>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -69,6 +70,33 @@ TEST(RawDecode, LinearImagesMustBeSixteenBitSingleChannel) {
   EXPECT_EQ(f.exposure_s, 0.5);
   cv::imwrite((dir / "eight.png").string(), cv::Mat(8, 8, CV_8UC1, cv::Scalar(3)));
   EXPECT_THROW(loadLinearImage(dir / "eight.png", 1, 0, 255, Cfa::kMono), InputError);
+}
+
+std::string linearImageError(const std::filesystem::path& file) {
+  try {
+    loadLinearImage(file, 1, 0, 65535, Cfa::kMono);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+// Only PNG and TIFF reach OpenCV (whose imread would try its DICOM and GDAL decoders on anything
+// else), and a PNG header cannot claim more pixels than its file could hold.
+TEST(RawDecode, LinearImagesAreCheckedBeforeDecoding) {
+  testing::TempDir dir;
+  std::ofstream(dir / "x.tif") << "II\x88\x88 not a TIFF";
+  EXPECT_EQ(linearImageError(dir / "x.tif"), (dir / "x.tif").string() + ": not a PNG or TIFF file");
+  cv::imwrite((dir / "big.png").string(), pattern(8, 8));
+  std::string bytes;
+  {
+    std::ifstream in(dir / "big.png", std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  bytes.replace(16, 8, std::string("\x00\x01\x86\xa0\x00\x01\x86\xa0", 8));  // 100000 x 100000
+  { std::ofstream(dir / "big.png", std::ios::binary) << bytes; }
+  EXPECT_NE(linearImageError(dir / "big.png").find("corrupt PNG header: 100000 x 100000 pixels cannot fit"),
+            std::string::npos);
 }
 
 }  // namespace
