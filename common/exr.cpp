@@ -148,15 +148,6 @@ std::unique_ptr<Imf::InputFile> openExr(const fs::path& path) {
   if (dw.min.x != 0 || dw.min.y != 0)
     throw InputError(path.string(), "data window starts at (" + std::to_string(dw.min.x) + ", " +
                                         std::to_string(dw.min.y) + "); FlareKit needs it at (0, 0)");
-  // Checked before any pixel buffer is allocated: a damaged header must not claim gigabytes.
-  const double pixels = (double(dw.max.x) + 1) * (double(dw.max.y) + 1);
-  double pixel_bytes = 0;
-  for (auto it = file->header().channels().begin(); it != file->header().channels().end(); ++it)
-    pixel_bytes += it.channel().type == Imf::HALF ? 2 : 4;
-  if (pixels * pixel_bytes > double(file_bytes) * kMaxExrCompressionRatio)
-    throw InputError(path.string(), "corrupt header: its data window (" + std::to_string(dw.max.x + 1) + " x " +
-                                        std::to_string(dw.max.y + 1) + " pixels) cannot fit in a file of " +
-                                        std::to_string(file_bytes) + " bytes");
   if (!file->isComplete())
     throw InputError(path.string(), "truncated: the file ends before all pixel data");
   return file;

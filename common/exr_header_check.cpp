@@ -5,6 +5,7 @@
 #include <string>
 
 #include "common/error.h"
+#include "common/exr.h"
 
 namespace flarekit::detail {
 namespace {
@@ -76,16 +77,27 @@ void checkExrHeaderSizes(const std::filesystem::path& path, std::uintmax_t file_
   const bool multipart = (flags & 0x1000) != 0;
   for (;;) {  // headers: one, or until an empty one in a multi-part file
     int attributes = 0;
+    std::int64_t pixel_bytes = 0, width = 0, height = 0;
     for (std::string name, type;; ++attributes) {
       if (!r.text(name)) return;
       if (name.empty()) break;
       std::int64_t size = 0;
       if (!r.text(type) || !r.int32(size)) return;
       const std::string what = "attribute '" + printable(name) + "'";
-      if (const auto fixed = fixedSizes().find(type); fixed != fixedSizes().end()) {
+      if (name == "dataWindow" && type == "box2i") {
+        std::int64_t min_x = 0, min_y = 0, max_x = 0, max_y = 0;
+        if (!r.int32(min_x) || !r.int32(min_y) || !r.int32(max_x) || !r.int32(max_y)) return;
+        width = max_x - min_x + 1;
+        height = max_y - min_y + 1;
+      } else if (const auto fixed = fixedSizes().find(type); fixed != fixedSizes().end()) {
         r.skip(fixed->second, what);
       } else if (type == "chlist") {  // channel records until an empty name; the size is not used
-        for (std::string channel; r.text(channel) && !channel.empty();) r.skip(16, what);
+        for (std::string channel; r.text(channel) && !channel.empty();) {
+          std::int64_t pixel_type = 0;
+          if (!r.int32(pixel_type)) return;
+          pixel_bytes += pixel_type == 1 ? 2 : 4;  // HALF, else UINT or FLOAT
+          r.skip(12, what);
+        }
       } else if (type == "preview") {  // width, height, then 4 bytes per pixel
         std::int64_t width = 0, height = 0;
         if (!r.int32(width) || !r.int32(height)) return;
@@ -102,6 +114,10 @@ void checkExrHeaderSizes(const std::filesystem::path& path, std::uintmax_t file_
       }
       if (!r.ok()) return;
     }
+    if (double(width) * double(height) * double(pixel_bytes) > double(file_bytes) * kMaxExrCompressionRatio)
+      throw InputError(path.string(), "corrupt header: its data window (" + std::to_string(width) + " x " +
+                                          std::to_string(height) + " pixels) cannot fit in a file of " +
+                                          std::to_string(file_bytes) + " bytes");
     if (!multipart || attributes == 0) return;
   }
 }

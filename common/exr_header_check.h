@@ -1,8 +1,10 @@
 #pragma once
 // A walk over an OpenEXR file's headers that reads every size OpenEXR would allocate from (an
 // attribute's declared size, a string vector's string lengths, a preview's width × height) and
-// refuses one larger than what follows in the file. OpenEXR allocates, and for some types fills,
-// those buffers while opening, so a damaged size would otherwise cost gigabytes before any error.
+// refuses one larger than what follows in the file; then refuses a data window whose pixels would
+// take more than kMaxExrCompressionRatio times the file's size. OpenEXR allocates, and for some
+// types fills, such buffers while opening (attributes, a compressor's line buffers), so a damaged
+// size would otherwise cost gigabytes before any error.
 // Used by common/exr.cpp before the file goes to Imf::InputFile.
 
 #include <cstdint>
