@@ -226,7 +226,6 @@ std::optional<ExrAttribute> typedValue(const Imf::Attribute& a) {
   return std::nullopt;
 }
 
-
 std::string compressionName(Imf::Compression c) {
   switch (c) {
     case Imf::NO_COMPRESSION: return "none";
