@@ -11,25 +11,14 @@
 
 using namespace flarekit;
 
-namespace {
-const std::filesystem::path& captureDir() {
-  static const std::filesystem::path dir = [] {
-    const auto d = fuzz::scratchDir() / "capture";
-    fuzz::makeSmallCapture(d);
-    return d;
-  }();
-  return dir;
-}
-}  // namespace
-
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   fuzz::quietLogs();
-  (void)captureDir();
+  (void)fuzz::scratchCapture();
   return 0;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   fuzz::writeScratchFile("capture/manifest.json", data, size);
-  fuzz::expectFlareKitErrors([&] { (void)fit::loadCapture(captureDir()); });
+  fuzz::expectFlareKitErrors([&] { (void)fit::loadCapture(fuzz::scratchCapture()); });
   return 0;
 }

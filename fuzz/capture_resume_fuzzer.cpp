@@ -13,20 +13,9 @@
 
 using namespace flarekit;
 
-namespace {
-const std::filesystem::path& captureDir() {
-  static const std::filesystem::path dir = [] {
-    const auto d = fuzz::scratchDir() / "resume";
-    fuzz::makeSmallCapture(d);
-    return d;
-  }();
-  return dir;
-}
-}  // namespace
-
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   fuzz::quietLogs();
-  (void)captureDir();
+  (void)fuzz::scratchCapture();
   return 0;
 }
 
@@ -34,12 +23,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static const acquisition::Rig rig = fuzz::captureRig();
   static acquisition::RigDevices devices = fuzz::captureDevices(rig);
   static const acquisition::CapturePlan plan = fuzz::capturePlan();
-  fuzz::writeScratchFile("resume/manifest.json", data, size);
+  fuzz::writeScratchFile("capture/manifest.json", data, size);
   std::atomic<bool> stop{true};
   acquisition::CaptureOptions options;
   options.resume = true;
   options.progress = false;
   options.stop_requested = &stop;
-  fuzz::expectFlareKitErrors([&] { (void)acquisition::runCapture(rig, devices, plan, captureDir(), options); });
+  fuzz::expectFlareKitErrors(
+      [&] { (void)acquisition::runCapture(rig, devices, plan, fuzz::scratchCapture(), options); });
   return 0;
 }

@@ -11,6 +11,7 @@
 
 #include "acquisition/simulated_camera.h"
 #include "common/exr.h"
+#include "fuzz/fuzz_support.h"
 
 namespace flarekit::fuzz {
 
@@ -104,6 +105,15 @@ void makeSmallCapture(const std::filesystem::path& dir, int stop_after_frames) {
   options.stop_requested = &stop;
   if (stop_after_frames == 0) stop = true;
   runCapture(rig, d, capturePlan(), dir, options);
+}
+
+const std::filesystem::path& scratchCapture() {
+  static const std::filesystem::path dir = [] {
+    const auto d = scratchDir() / "capture";
+    makeSmallCapture(d);
+    return d;
+  }();
+  return dir;
 }
 
 }  // namespace flarekit::fuzz

@@ -21,4 +21,7 @@ acquisition::CapturePlan capturePlan();
 // frames, rendered at 0°, already request the stop).
 void makeSmallCapture(const std::filesystem::path& dir, int stop_after_frames = -1);
 
+// The small capture in this process's scratch folder (scratchDir()/capture), made on first use.
+const std::filesystem::path& scratchCapture();
+
 }  // namespace flarekit::fuzz
