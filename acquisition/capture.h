@@ -4,6 +4,8 @@
 //
 // ── Capture folder layout ─────────────────────────────────────────────────────────────────────
 //   DIR/manifest.json            the session (below); rewritten atomically after every frame
+//   DIR/.flarekit.lock           locked (flock) while a session runs in DIR: one at a time
+//                                  (common/folder_lock.h); holds the last holder's process id
 //   DIR/frames/frame_NNNN.exr    merged HDR frame of plan angle NNNN (0-based, plan order):
 //                                  main layer "Y" (mono sensor) or "R","G","B" (Bayer sensor,
 //                                  bilinear demosaic of the merged mosaic), float32 (half with
