@@ -9,11 +9,9 @@
 #include <cmath>
 #include <functional>
 #include <fstream>
-#include <random>
-
-#include <opencv2/imgproc.hpp>
 
 #include "acquisition/simulated_camera.h"
+#include "acquisition/testing.h"
 #include "common/config.h"
 #include "common/exr.h"
 #include "common/folder_lock.h"
@@ -24,58 +22,12 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A spot whose position follows the angle, on a dim background; calls `on_render` per render.
-class SpotScene : public SceneProvider {
- public:
-  std::function<void(double)> on_render;
-  cv::Mat radiance(double angle_deg, double) override {
-    if (on_render) on_render(angle_deg);
-    cv::Mat r(24, 32, CV_32FC1, cv::Scalar(0.05));
-    cv::circle(r, {16 - static_cast<int>(angle_deg), 12}, 4, cv::Scalar(3.0), -1);
-    return r;
-  }
-  ExrImage truth(double angle_deg, double f) override {
-    ExrImage e;
-    e.layers.push_back({"", radiance(angle_deg, f)});
-    return e;
-  }
-  std::string lensName() const override { return "spot"; }
-  double pixelPitchUm() const override { return 5; }
-  double focalLengthMm() const override { return 50; }
-};
+using testing::SpotScene;
 
-// Test-local sensor: Poisson electrons (1000 e/s per unit), 4 e/DN, black 100, 12 bit.
-cv::Mat exposeTest(const cv::Mat& radiance, double t, double, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  cv::Mat out(radiance.size(), CV_16UC1);
-  for (int y = 0; y < radiance.rows; ++y)
-    for (int x = 0; x < radiance.cols; ++x) {
-      std::poisson_distribution<int> p(std::max(1e-9, radiance.at<float>(y, x) * 1000.0 * t));
-      out.at<uint16_t>(y, x) = static_cast<uint16_t>(std::min(4095, 100 + p(rng) / 4));
-    }
-  return out;
-}
+Rig testRig(FaultConfig faults = {}) { return testing::spotRig("unit-test", faults); }
 
-Rig testRig(FaultConfig faults = {}) {
-  Rig rig;
-  rig.name = "unit-test";
-  rig.file = "unit-test.toml";
-  rig.sensor.black_level_dn = 100;
-  rig.sensor.bit_depth = 12;
-  rig.sensor.base_gain_e_per_dn = 4;
-  rig.sensor.electrons_per_unit_s = 1000;
-  rig.faults = faults;
-  return rig;
-}
-
-RigDevices devices(const Rig& rig, std::shared_ptr<SpotScene> scene = nullptr) {
-  auto stage = std::make_shared<SimulatedStage>();
-  RigDevices d;
-  d.head = std::make_unique<SimulatedHead>(stage, SimulatedHeadConfig{}, rig.faults);
-  d.camera = std::make_unique<SimulatedCamera>(
-      stage, scene ? scene : std::make_shared<SpotScene>(), exposeTest, Cfa::kMono, 100.0,
-      [](double) { return 4095.0; }, 1, rig.faults);
-  return d;
+RigDevices devices(const Rig& rig, std::shared_ptr<SpotScene> scene = std::make_shared<SpotScene>()) {
+  return testing::spotDevices(rig, std::move(scene));
 }
 
 CapturePlan smallPlan(double to = 4, double step = 1) {
@@ -210,11 +162,10 @@ TEST(Capture, AFreshCaptureRemovesTheStrayTemporariesOfAKilledOne) {
 TEST(Capture, StopsAfterTheCurrentFrameAndResumesExactly) {
   testing::TempDir dir;
   Rig rig = testRig();
-  auto scene = std::make_shared<SpotScene>();
   std::atomic<bool> stop{false};
-  scene->on_render = [&](double angle) {
+  auto scene = std::make_shared<SpotScene>([&](double angle) {
     if (angle == 2) stop = true;  // "Ctrl-C" while frame 2 is being taken
-  };
+  });
   RigDevices d = devices(rig, scene);
   CapturePlan plan = smallPlan();
   CaptureOptions options;

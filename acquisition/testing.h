@@ -1,0 +1,83 @@
+#pragma once
+// A small synthetic rig for acquisition's tests and the capture fuzz targets (header-only; not
+// part of the library): a 32×24 scene with one spot that follows the angle, a 12-bit Poisson
+// sensor, and simulated head and camera on one stage.
+
+#include <algorithm>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <random>
+#include <string>
+#include <utility>
+
+#include <opencv2/imgproc.hpp>
+
+#include "acquisition/simulated_camera.h"
+#include "common/exr.h"
+
+namespace flarekit::testing {
+
+using namespace acquisition;
+
+// A spot whose position follows the angle, on a dim background; its truth has the spot as the
+// light and half of it as one ghost layer. Calls `on_render` with the angle of every render.
+class SpotScene : public SceneProvider {
+ public:
+  explicit SpotScene(std::function<void(double)> on_render = {}) : on_render_(std::move(on_render)) {}
+  cv::Mat radiance(double angle_deg, double) override {
+    if (on_render_) on_render_(angle_deg);
+    cv::Mat r(24, 32, CV_32FC1, cv::Scalar(0.05));
+    cv::circle(r, {16 - static_cast<int>(angle_deg), 12}, 4, cv::Scalar(3.0), -1);
+    return r;
+  }
+  ExrImage truth(double angle_deg, double f) override {
+    ExrImage e;
+    e.layers.push_back({"", radiance(angle_deg, f)});
+    e.layers.push_back({"ghost.1", radiance(angle_deg, f) * 0.5});
+    return e;
+  }
+  std::string lensName() const override { return "spot"; }
+  double pixelPitchUm() const override { return 5; }
+  double focalLengthMm() const override { return 50; }
+
+ private:
+  std::function<void(double)> on_render_;
+};
+
+// The sensor of spotRig(): Poisson electrons (1000 e/s per unit), 4 e/DN, black 100, 12 bit.
+inline cv::Mat exposeSpot(const cv::Mat& radiance, double t, double, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  cv::Mat out(radiance.size(), CV_16UC1);
+  for (int y = 0; y < radiance.rows; ++y)
+    for (int x = 0; x < radiance.cols; ++x) {
+      std::poisson_distribution<int> p(std::max(1e-9, radiance.at<float>(y, x) * 1000.0 * t));
+      out.at<uint16_t>(y, x) = static_cast<uint16_t>(std::min(4095, 100 + p(rng) / 4));
+    }
+  return out;
+}
+
+// A rig whose sensor section matches exposeSpot.
+inline Rig spotRig(const std::string& name, FaultConfig faults = {}) {
+  Rig rig;
+  rig.name = name;
+  rig.file = name + ".toml";
+  rig.sensor.black_level_dn = 100;
+  rig.sensor.bit_depth = 12;
+  rig.sensor.base_gain_e_per_dn = 4;
+  rig.sensor.electrons_per_unit_s = 1000;
+  rig.faults = faults;
+  return rig;
+}
+
+// A simulated head and a mono camera on one stage, both with the rig's faults.
+inline RigDevices spotDevices(const Rig& rig, std::shared_ptr<SceneProvider> scene = std::make_shared<SpotScene>()) {
+  auto stage = std::make_shared<SimulatedStage>();
+  RigDevices d;
+  d.head = std::make_unique<SimulatedHead>(stage, SimulatedHeadConfig{}, rig.faults);
+  d.camera = std::make_unique<SimulatedCamera>(
+      stage, std::move(scene), exposeSpot, Cfa::kMono, 100.0, [](double) { return 4095.0; }, 1, rig.faults);
+  return d;
+}
+
+}  // namespace flarekit::testing
