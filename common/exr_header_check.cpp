@@ -1,6 +1,9 @@
 #include "common/exr_header_check.h"
 
+#include <algorithm>
+#include <cstdint>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <string>
 
@@ -101,7 +104,10 @@ void checkExrHeaderSizes(const std::filesystem::path& path, std::uintmax_t file_
       } else if (type == "preview") {  // width, height, then 4 bytes per pixel
         std::int64_t width = 0, height = 0;
         if (!r.int32(width) || !r.int32(height)) return;
-        r.skip(std::uint32_t(width) * std::int64_t(std::uint32_t(height)) * 4, what + "'s preview");
+        // OpenEXR reads both as unsigned: up to (2³² − 1)² pixels, which only unsigned 64 bits hold.
+        const std::uint64_t pixels = std::uint64_t(std::uint32_t(width)) * std::uint32_t(height);
+        const std::uint64_t most = std::numeric_limits<std::int64_t>::max() / 4;
+        r.skip(static_cast<std::int64_t>(std::min(pixels, most) * 4), what + "'s preview");
       } else if (type == "stringvector") {  // length-prefixed strings filling `size`
         for (std::int64_t read = 0; read < size;) {
           std::int64_t length = 0;
