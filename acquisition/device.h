@@ -1,5 +1,5 @@
 #pragma once
-// Interfaces of the rig's hardware (shared/DESIGN.md, Hardware): a RotationHead that turns the
+// Interfaces of the rig's hardware (docs/design.md, Hardware): a RotationHead that turns the
 // camera about a vertical axis through the entrance pupil, and a Camera that takes linear RAW
 // frames. Backends live in their own files (simulated_*.cpp, gpio_stepper_head.cpp, tic_head.cpp,
 // gphoto2_camera.cpp) and are chosen by the rig file (acquisition/rig.h).

@@ -1,6 +1,6 @@
 #pragma once
 // Noise-optimal HDR merge of bracketed linear RAW frames, per photosite, before demosaicing
-// (shared/HARDWARE.md, "HDR merge from linear RAW"; Granados et al., CVPR 2010).
+// (docs/design.md, Hardware; Granados et al., CVPR 2010).
 //
 // For every photosite with samples vᵢ at exposure times tᵢ:
 //   sᵢ = vᵢ − dᵢ          (dᵢ: the averaged dark frame for tᵢ, else the black level)
@@ -74,7 +74,7 @@ MergeResult mergeBracket(const std::vector<RawFrame>& frames, const MergeOptions
 // Simple bilinear demosaic of a merged CFA mosaic to CV_32FC3 (R,G,B). kMono gives CV_32FC1.
 cv::Mat demosaicBilinear(const cv::Mat& mosaic, Cfa cfa);
 
-// Metadata for the merged frame's EXR attributes (shared/DESIGN.md, Conventions).
+// Metadata for the merged frame's EXR attributes (docs/design.md, Conventions).
 struct FrameMetadata {
   double angle_deg = 0;                // flarekit.angle_deg (omitted when has_angle is false)
   bool has_angle = false;

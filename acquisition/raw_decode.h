@@ -1,6 +1,6 @@
 #pragma once
 // Decoding RAW files to linear photosite values (LibRaw), and reading linear 16-bit TIFF/PNG
-// frames, for the HDR merge (shared/HARDWARE.md, "Camera: libgphoto2 2.5.30 and LibRaw 0.20").
+// frames, for the HDR merge.
 
 #include <cstddef>
 #include <filesystem>

@@ -83,7 +83,7 @@ class RenderScene : public SceneProvider {
     if (!cached_ || angle_deg != angle_ || f_number != f_number_) {
       render::FlareRenderOptions options = options_;
       options.f_number = f_number;
-      // θ > 0 moves the light's image to −x (shared/DESIGN.md). One renderer for the whole
+      // θ > 0 moves the light's image to −x (docs/design.md). One renderer for the whole
       // capture: its frame buffers and triangle lists are reused.
       cached_ = false;
       renderer_.render(lens_, render::LightDirection{trueAngleDeg(angle_deg), 0.0}, options,

@@ -1,9 +1,9 @@
 #pragma once
 // A rotation head driven by a Pololu Tic stepper controller over USB (libusb control transfers;
-// protocol in shared/HARDWARE.md). Commands: energize, exit safe start, set target position,
-// poll the current position until it is reached while resetting the command timeout, halt and
-// set position; errors read from the error-status variable into clear messages; homing with the
-// Tic's own "go home" (its limit/home switch configuration made with ticgui).
+// protocol as in Pololu's Tic user's guide). Commands: energize, exit safe start, set target
+// position, poll the current position until it is reached while resetting the command timeout,
+// halt and set position; errors read from the error-status variable into clear messages; homing
+// with the Tic's own "go home" (its limit/home switch configuration made with ticgui).
 //
 // Moves share the GPIO stepper's rules (acquisition/stepper_motion.h): whole microsteps, soft
 // limits, backlash taken up by always arriving in the approach direction.

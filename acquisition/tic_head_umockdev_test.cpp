@@ -18,7 +18,7 @@
 namespace flarekit::acquisition {
 namespace {
 
-// What a Tic T834 does with the commands FlareKit sends (shared/HARDWARE.md).
+// What a Tic T834 does with the commands FlareKit sends (Pololu's Tic user's guide).
 struct TicModel {
   std::mutex mutex;
   int32_t position = 0, target = 0;

@@ -1,5 +1,5 @@
 #pragma once
-// Every file FlareKit writes appears whole or not at all (shared/DESIGN.md, Conventions): the
+// Every file FlareKit writes appears whole or not at all (docs/design.md, Conventions): the
 // content goes to a temporary name in the same folder, is flushed and fsynced, and is renamed over
 // the target; the folder is fsynced so the rename survives a crash. A writer killed at any moment
 // leaves the old file (or none) and at worst a stray ".<name>.tmp-XXXXXX" beside it.

@@ -1,5 +1,5 @@
 #pragma once
-// JSON and TOML documents with errors that name the file and the key (shared/STYLE.md §5).
+// JSON and TOML documents with errors that name the file and the key.
 //
 // Both formats load into one tree (TOML tables become JSON objects), read through ConfigNode,
 // which remembers its file and key path: a wrong value reads

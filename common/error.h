@@ -1,7 +1,8 @@
 #pragma once
-// Error tiers (shared/STYLE.md §5): programming errors are assertions; problems with what the user
-// gave us are InputError (the CLI exits with 2); failures of hardware, I/O or the environment are
-// RuntimeError (the CLI exits with 1). Messages are one line and name the file, key or device.
+// Error tiers (docs/design.md, Conventions): programming errors are assertions; problems with
+// what the user gave us are InputError (the CLI exits with 2); failures of hardware, I/O or the
+// environment are RuntimeError (the CLI exits with 1). Messages are one line and name the file,
+// key or device.
 
 #include <stdexcept>
 #include <string>

@@ -1,5 +1,5 @@
 #pragma once
-// OpenEXR images with typed metadata and layers (shared/DESIGN.md, Conventions).
+// OpenEXR images with typed metadata and layers (docs/design.md, Conventions).
 //
 // Images are cv::Mat CV_32FC1 (luminance) or CV_32FC3 (linear R,G,B in memory order). A file holds
 // layers: the main layer "" with channels "Y" or "R","G","B", and named layers such as "ghost.3"

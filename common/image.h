@@ -1,5 +1,5 @@
 #pragma once
-// Image conventions (shared/DESIGN.md): cv::Mat CV_32FC1 (luminance) or CV_32FC3 (linear R,G,B
+// Image conventions (docs/design.md): cv::Mat CV_32FC1 (luminance) or CV_32FC3 (linear R,G,B
 // in memory order), linear radiance, x right, y down, pixel (i, j) centred at (i + 0.5, j + 0.5).
 // Pictures for people (PNG previews) are the only gamma-encoded images, made here.
 

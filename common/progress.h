@@ -1,5 +1,5 @@
 #pragma once
-// Progress for long work (shared/DESIGN.md, Conventions): on a terminal a bar with count, rate
+// Progress for long work (docs/design.md, Conventions): on a terminal a bar with count, rate
 // and ETA redrawn in place; when stderr is not a terminal at most one line per 10 %; nothing when
 // the log level is below kInfo (--quiet).
 

@@ -20,8 +20,8 @@
 // brightness (the light's starburst, a brighter neighbour crossing the region) are outliers. (A
 // percentile of the frame over the region would be ruled by exactly those.)
 //
-// ρ is Cauchy's loss ρ(u) = b·ln(1 + u/b), b = loss_scale², applied per pixel
-// (shared/FITTING_NOTES.md): what the model does not explain (the light's halo and starburst,
+// ρ is Cauchy's loss ρ(u) = b·ln(1 + u/b), b = loss_scale², applied per pixel:
+// what the model does not explain (the light's halo and starburst,
 // neighbours, noise) then pulls on the fit with bounded force.
 //
 // Masks: pixels that are saturated or non-finite in the frame carry no data residual; edge

@@ -1,6 +1,6 @@
 // Tests of the cost and the group solver: the edge filter, analytic Jacobians against
 // ceres::GradientChecker, and round trips (render ghosts with known parameters, fit, recover them)
-// for both optimizers (shared/STYLE.md §11).
+// for both optimizers.
 #include "fit/cost.h"
 
 #include <random>

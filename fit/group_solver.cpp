@@ -213,7 +213,7 @@ GroupFitResult solveCeres(GroupCost& cost, std::span<const model::GhostParameter
   std::vector<double*> pointers;
   for (auto& b : blocks) pointers.push_back(b.data());
   // The samples' rows as their normal equations' square root, the loss per pixel inside them
-  // (GroupCost::robustSample; shared/FITTING_NOTES.md: per-pixel Cauchy is robust against
+  // (GroupCost::robustSample; per-pixel Cauchy is robust against
   // unmodelled blobs): the steps of blocks of one pixel each, without Ceres's bookkeeping per
   // block, and the products formed on every thread.
   problem.AddResidualBlock(new SquareRootResidual(cost, normal), nullptr, pointers);

@@ -3,7 +3,7 @@
 // (fit/cost.h), with either optimizer:
 //
 //  - kCeres (default): Ceres's Levenberg–Marquardt trust region with the parameters' bounds,
-//    Cauchy's loss per pixel (shared/FITTING_NOTES.md; GroupCost::robustSample weights each pixel
+//    Cauchy's loss per pixel (GroupCost::robustSample weights each pixel
 //    as Ceres's own loss would), analytic Jacobians from model/'s derivative images (the edge part
 //    is E applied to them), a dense Cholesky solve of the normal equations. The model is rendered
 //    once per evaluation point through a ceres::EvaluationCallback, and the pixels' normal

@@ -171,8 +171,7 @@ class ModelEquations {
 // Renders the model once per evaluation point (as group_solver.cpp's callback does for a frame).
 class ModelCallback : public ceres::EvaluationCallback {
  public:
-  ModelCallback(ModelEquations& equations, std::vector<GhostCurves>& curves)
-      : equations_(equations), curves_(curves) {}
+  explicit ModelCallback(ModelEquations& equations) : equations_(equations) {}
   void PrepareForEvaluation(bool evaluate_jacobians, bool new_point) override {
     if (evaluated_ && !new_point && (!evaluate_jacobians || had_jacobians_)) return;
     equations_.evaluate(evaluate_jacobians);
@@ -182,7 +181,6 @@ class ModelCallback : public ceres::EvaluationCallback {
 
  private:
   ModelEquations& equations_;
-  std::vector<GhostCurves>& curves_;
   bool evaluated_ = false, had_jacobians_ = false;
 };
 
@@ -391,7 +389,7 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     });
     sum.refine_frames = static_cast<int>(frames.size());
     ModelEquations equations(curves, frames, channels);
-    ModelCallback callback(equations, curves);
+    ModelCallback callback(equations);
     ceres::Problem::Options problem_options;
     problem_options.evaluation_callback = &callback;
     ceres::Problem problem(problem_options);

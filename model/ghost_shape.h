@@ -4,9 +4,9 @@
 // transfer function of the signed distance to that outline.
 //
 // Coordinates are image pixels: x to the right, y down, pixel (i, j) centred at (i + 0.5, j + 0.5)
-// (shared/DESIGN.md, Conventions). All sizes and fall-off ranges are in pixels.
+// (docs/design.md, Conventions). All sizes and fall-off ranges are in pixels.
 //
-// The shape (shared/DESIGN.md, "The ghost model"):
+// The shape (docs/design.md, "The ghost model"):
 //   centre M = (Mx, My); left point P_L = (Mx − L, My), right point P_R = (Mx + R, My),
 //   top P_T = (Mx, My − h), bottom P_B = (Mx, My + h).
 //   Segment 0: P_L → P_T, control points P_L + (0, −Cl·h) and P_T + (−Cl·L, 0)
@@ -112,7 +112,7 @@ GhostParameters fromParameterVector(std::span<const double> values, int channels
 // Ceres's own default bound) marks a side without a limit. The ranges (pixels where lengths):
 //   Mx, My  [−1e5, 1e5]           the centre may lie outside the image
 //   L, R, h [0.5, 1e4]            half a pixel up to beyond any sensor
-//   Cl, Cr  [0, 1]                convex outlines (shared/FITTING_NOTES.md)
+//   Cl, Cr  [0, 1]                convex outlines
 //   Ib, Ii  [0, kUnbounded]       radiance is never negative
 //   Fi, Fo  [0.1, 1e4]
 //   Ei, Eo  [0.1, 10]             slope exponents

@@ -133,7 +133,7 @@ inline void evalDistance(const detail::PreparedShape& s, cv::Point2d q,
   e.by = s.seg[e.segment].y(e.t);
 }
 
-// ∂d/∂(Mx, My, L, R, h, Cl, Cr) at the fixed nearest point (envelope theorem, FITTING_NOTES).
+// ∂d/∂(Mx, My, L, R, h, Cl, Cr) at the fixed nearest point (envelope theorem).
 inline void distanceGradient(const GhostParameters& g, const detail::PreparedShape& s,
                              const PointEval& e, double* grad) {
   double nx = e.rx - e.bx, ny = e.ry - e.by;

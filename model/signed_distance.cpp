@@ -64,7 +64,7 @@ std::array<double, param::kShapeCount> signedDistanceGradient(const GhostParamet
                                                                cv::Point2d p,
                                                                const NearestPoint& nearest) {
   // d = σ|p − B(t*)|; by the envelope theorem ∂d/∂q = −σ u·∂B/∂q(t*) with u the unit vector from
-  // B(t*) to p (shared/FITTING_NOTES.md). On the outline u is undefined: use the outward normal,
+  // B(t*) to p. On the outline u is undefined: use the outward normal,
   // which σu equals wherever the nearest point is not a corner.
   cv::Point2d n = p - nearest.point;
   const double len = std::hypot(n.x, n.y);

@@ -5,7 +5,7 @@
 // The magnitude comes from a nearest-point search on the Béziers, the sign from an exact inside
 // test. The shape is mirror-symmetric about y = My, so the point is reflected into the upper half
 // (y ≤ My), where the nearest point of the whole outline always lies on segment 0 or 1, and only
-// those two are searched (shared/FITTING_NOTES.md).
+// those two are searched.
 //
 // The search: the stationarity condition (B(t) − p)·B′(t) = 0 is a quintic in t. The default
 // method takes coarse samples of each segment (evenly spaced in t, plus more where the outline
@@ -17,7 +17,7 @@
 // long thin shapes); such pieces are split until that is excluded or the improvement they could
 // bring is below 1e-4 px. Accuracy: ~1e-6 px in practice, verified against a dense reference.
 // The paper says "binary search, 12 iterations" without saying on what; kBisection12 implements
-// the reading that works best in shared/FITTING_NOTES.md (bisection on the sign of
+// the reading that works best (bisection on the sign of
 // (B − p)·B′ from the nearer end), for comparison only.
 //
 // The search returns the nearest point and its parameter t*, so derivatives can use the envelope
@@ -75,7 +75,7 @@ NearestPoint nearestPoint(const GhostParameters& shape, cv::Point2d p,
 double signedDistance(const GhostParameters& shape, cv::Point2d p,
                       const SignedDistanceOptions& options = {});
 
-// Exact inside test (shared/FITTING_NOTES.md): reflect into the upper half, pick the quarter by x,
+// Exact inside test: reflect into the upper half, pick the quarter by x,
 // solve x(t) = p.x on that monotone segment, compare heights. Points on the outline count as
 // inside. Needs 0 ≤ Cl, Cr ≤ 1.
 bool isInside(const GhostParameters& shape, cv::Point2d p);

@@ -34,7 +34,7 @@ BrightnessScale brightnessScale(const ExposureSettings& capture, const ExposureS
   BrightnessScale b;
   b.ev100_capture = ev100(capture);
   b.ev100_scene = ev100(scene);
-  // shared/FITTING_NOTES.md: log2 B = (EV100_F − EV100_R) + log2((l_R·α_R)/(l_F·α_F)), which is
+  // log2 B = (EV100_F − EV100_R) + log2((l_R·α_R)/(l_F·α_F)), which is
   // Walch 2018 Eq. 2 with the f-number, ISO and time ratios gathered into exposure values.
   b.log2_scale = (b.ev100_capture - b.ev100_scene) +
                  std::log2(light.scene_illuminance_lux / light.capture_illuminance_lux);

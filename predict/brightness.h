@@ -5,7 +5,7 @@
 //
 // with F the capture the model was fitted to and R the scene (its camera and one light). The model's
 // overlay times B is in the scene camera's linear image units. In exposure values
-// (shared/FITTING_NOTES.md; Stingray 2017 / Lagarde & de Rousiers: EV100 = log2(N²/t · 100/S)):
+// (Stingray 2017 / Lagarde & de Rousiers: EV100 = log2(N²/t · 100/S)):
 //
 //   log2 B = (EV100_F − EV100_R) + log2((l_R·α_R) / (l_F·α_F))
 //

@@ -1,4 +1,4 @@
-// Walch 2018 Eq. 2 and its exposure-value form (shared/FITTING_NOTES.md).
+// Walch 2018 Eq. 2 and its exposure-value form.
 #include "predict/brightness.h"
 
 #include <gtest/gtest.h>

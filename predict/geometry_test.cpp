@@ -1,4 +1,4 @@
-// Light geometry: lights placed at known angles give the expected θ and φ (shared/DESIGN.md
+// Light geometry: lights placed at known angles give the expected θ and φ (docs/design.md
 // conventions), behind-camera and out-of-range lights are recognised.
 #include "predict/geometry.h"
 

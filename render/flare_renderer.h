@@ -17,7 +17,7 @@
 // colour-matching functions and converted to linear sRGB, normalised so that a spectrally flat
 // (equal-energy) light of relative irradiance 1 gives Y = 1.
 //
-// Geometry (shared/DESIGN.md, Conventions): the optical axis meets the image at (W/2, H/2) (or
+// Geometry (docs/design.md, Conventions): the optical axis meets the image at (W/2, H/2) (or
 // where FlareRenderOptions::optical_axis_offset_px moves it), pixel (i, j) is centred at
 // (i + 0.5, j + 0.5), x right, y down, square pixels. θ > 0 moves the light's image towards −x;
 // the roll φ turns the light direction about the optical axis so the light's image sits on the
@@ -126,7 +126,7 @@ struct GhostRecord {
   cv::Mat image;  // CV_32FC3, only when FlareRenderOptions::ghost_layers
 };
 
-// What happened in one render (a summary, shared/STYLE.md §4).
+// What happened in one render (a summary).
 struct RenderSummary {
   int ghosts_enumerated = 0;  // all two-reflection sequences of the lens
   int ghosts_rendered = 0;    // after culling

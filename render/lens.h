@@ -1,6 +1,6 @@
 #pragma once
 // Lens prescriptions: the sequence of spherical surfaces from the object side to the sensor
-// (shared/DESIGN.md, "The physical renderer"; schema in lenses/README.md), their validation, the
+// (docs/design.md, "The physical renderer"; schema in lenses/README.md), their validation, the
 // pbrt "realistic camera" .dat import, paraxial analysis and stopping down.
 //
 // Conventions: millimetres, surfaces in object-to-image order, radius > 0 when the centre of

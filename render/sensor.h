@@ -1,8 +1,8 @@
 #pragma once
 // A camera sensor: turns a linear radiance image (render/flare_renderer.h units) and an exposure
 // time into a RAW-like uint16 frame with photon shot noise, read noise, black level, quantisation
-// and clipping (shared/DESIGN.md "Sensor"). The acquisition layer's simulated camera uses it, so
-// HDR merging sees realistic noise and saturation.
+// and clipping (docs/design.md, "The physical renderer"). The acquisition layer's simulated
+// camera uses it, so HDR merging sees realistic noise and saturation.
 //
 // Model, per pixel (EMVA 1288 style):
 //   mean electrons  μ_e = radiance · electrons_per_unit_s · exposure_s   (clipped at full well)

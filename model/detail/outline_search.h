@@ -387,8 +387,8 @@ inline void splitPiece(const PowerCubic& c, int which, double px, double py,
 }
 
 // The nearest point of the upper segments 0 and 1 to the relative point (px, py). Coarse samples
-// (shared/FITTING_NOTES.md: sampling then Newton is the robust choice), then every piece between
-// two samples that could hold a nearer point (by its box) is searched (searchPiece), so no basin
+// (a plain Newton or bisection from one start misses basins), then every piece between two
+// samples that could hold a nearer point (by its box) is searched (searchPiece), so no basin
 // of the distance hides between samples, even deep inside long thin shapes. The segment holding
 // the best sample is searched first, so its result prunes the other.
 //
