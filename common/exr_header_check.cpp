@@ -115,7 +115,9 @@ void checkExrHeaderSizes(const std::filesystem::path& path, std::uintmax_t file_
           r.skip(length, what + "'s string");
           read += 4 + length;
         }
-      } else {  // string, floatvector, idmanifest and types OpenEXR does not know: `size` bytes
+      } else if (type == "floatvector") {  // as many whole floats as `size` holds
+        r.skip(size / 4 * 4, what);
+      } else {  // string, idmanifest and types OpenEXR does not know: `size` bytes
         r.skip(size, what);
       }
       if (!r.ok()) return;

@@ -274,6 +274,15 @@ TEST(Exr, AttributeAfterAChannelListLongerThanItsSizeIsChecked) {
   }
 }
 
+// OpenEXR reads a float vector as the whole floats its size holds, leaving the 1–3 bytes over for
+// the next attribute's name; the check reads it so and finds the 1.9 GB attribute OpenEXR then sees
+// (input found by fuzz/exr_fuzzer).
+TEST(Exr, AttributeAfterAFloatVectorOfOddSizeIsChecked) {
+  const std::filesystem::path file =
+      std::filesystem::path(FLAREKIT_SOURCE_DIR) / "fuzz/corpus/exr/regression_floatvector_size_not_a_multiple_of_4.exr";
+  expectInputError([&] { readExr(file); }, file, "truncated or corrupt header: attribute '");
+}
+
 // Attributes print as the shortest text that reads back, subnormal numbers too.
 TEST(Exr, DescribesSubnormalAndNonFiniteAttributes) {
   TempDir dir;
