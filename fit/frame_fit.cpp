@@ -52,10 +52,12 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const LightImage& light
   fit.frame = index;
   fit.angle_deg = frame.angle_deg;
   fit.noise_sigma = estimatePixelNoiseSigma(frame.image, frame.valid);
+  std::vector<std::array<bool, 2>> traced;  // whether the sweep traced its left, right border here
   for (const auto& c : candidates)
     if (c.present(index)) {
       fit.ghost_ids.push_back(c.id);
       fit.ghosts.push_back(c.seed(index));
+      traced.push_back({c.leftSeen(index), c.rightSeen(index)});
     }
   const std::vector<model::GhostParameters> seeds = fit.ghosts;
   // Largest first: the small ones then fit on what the large ones leave.
@@ -95,10 +97,8 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const LightImage& light
       // outline (beyond the frame, in the light) only roughly.
       const model::GhostParameters& seed = seeds[i];
       const double size = std::max({seed.left, seed.right, seed.height});
-      auto border = [&](double x) {
-        return x >= 0 && x <= stack.size.width ? o.seen_border_sigma_px : o.unseen_sigma_fraction * size;
-      };
-      const std::array<double, 6> sigmas = {border(seed.center_x - seed.left), border(seed.center_x + seed.right), 1.0,
+      auto border = [&](bool seen) { return seen ? o.seen_border_sigma_px : o.unseen_sigma_fraction * size; };
+      const std::array<double, 6> sigmas = {border(traced[i][0]), border(traced[i][1]), 1.0,
                                             o.unseen_sigma_fraction * seed.height, 0.3, 0.3};
       GroupCost cost(pyramid, edge, others, std::span(&shapes[i], 1), o.cost, std::span(&sigmas, 1));
       const GroupFitResult r = solveGroup(cost, std::span(&shapes[i], 1), o.solver);

@@ -190,6 +190,15 @@ std::optional<model::Polynomial> lightCurve(const SweepImage& s) {
   return robustPolynomial(t, x, 3);
 }
 
+// The optical zero the pairs agree on, as keepPairsThroughTheZero finds it: the light's curve and
+// its x there (the axis); what fitBorderModel measures a ghost's borders from.
+struct ZeroOfPairs {
+  model::Polynomial light;  // the light's curve x(tan θ)
+  double axis_x_px = 0;     // the light's x at the zero
+
+  double lightAt(double angle_deg) const { return light.evaluate(std::tan(angle_deg * std::numbers::pi / 180)); }
+};
+
 // Keeps the pairs whose middle is, as a real ghost's, an odd function about the optical zero: the
 // point of the sweep where the light lies on the axis and every ghost is centred on it. A pair
 // fits the zero at (θz, light's x there = cx) when m − cx = k·u + k₃·u³ (u = the light's x − cx)
@@ -197,10 +206,12 @@ std::optional<model::Polynomial> lightCurve(const SweepImage& s) {
 // their shared frames) fit, and the pairs that do not are dropped: two unrelated borders, or a
 // border and a rim's inner edge, are centred elsewhere. Pairs centred on the light itself (its
 // starburst's fringes on either side) fit every zero, and are the light's image: dropped too.
+// Returns the zero, or nullopt where the light's curve is unknown or no pair fits one.
 template <class Pair>
-void keepPairsThroughTheZero(const SweepImage& s, const CandidateOptions& o, std::vector<Pair>& pairs) {
+std::optional<ZeroOfPairs> keepPairsThroughTheZero(const SweepImage& s, const CandidateOptions& o,
+                                                   std::vector<Pair>& pairs) {
   const std::optional<model::Polynomial> light = lightCurve(s);
-  if (!light || pairs.empty()) return;
+  if (!light || pairs.empty()) return std::nullopt;
   auto light_at = [&](double angle) { return light->evaluate(std::tan(angle * std::numbers::pi / 180)); };
   std::vector<Pair> off_light;
   for (auto& p : pairs) {
@@ -243,6 +254,51 @@ void keepPairsThroughTheZero(const SweepImage& s, const CandidateOptions& o, std
   for (auto& p : pairs)
     if (fits(p, light_at(best_zero))) kept.push_back(std::move(p));
   pairs = std::move(kept);
+  if (best_support <= 0) return std::nullopt;
+  return ZeroOfPairs{*light, light_at(best_zero)};
+}
+
+// A ghost's borders over the whole capture. A rotationally symmetric lens images a light at −u
+// from the axis as the mirror image of one at +u, so a ghost's middle is an odd function of the
+// light's offset u and its half-width an even one (and nearly constant: a ghost keeps its size).
+// Fitted once to every point of its traces (x_L = m − w, x_R = m + w), this gives its borders
+// where the sweep does not see them: beyond the frame, in the light's zone, or never (a ghost with
+// one border seen, whose half-width is then its border's distance from the axis at u = 0).
+struct BorderModel {
+  double k1 = 0, k3 = 0, w0 = 0, w2 = 0;  // m − cx = k1·u + k3·u³·10⁻⁴, w = w0 + w2·u²·10⁻⁴
+
+  double middle(double u, double cx) const { return cx + k1 * u + k3 * u * u * u * 1e-4; }
+  double halfWidth(double u) const { return w0 + w2 * u * u * 1e-4; }
+};
+
+// The border model of a ghost from its traces (either may be null), or nullopt when its points do
+// not run so (within the pairs' tolerance) or its half-width is not positive: then they bound no
+// ghost centred on the axis. The half-width's change (w2) is fitted only with both borders seen.
+std::optional<BorderModel> fitBorderModel(const SweepImage& s, const ZeroOfPairs& zero, const BorderTrace* l,
+                                          const BorderTrace* r, const CandidateOptions& o) {
+  const bool both = l && r;
+  std::vector<std::array<double, 5>> rows;  // u, u³, ∓1, ∓u², x − cx
+  for (const BorderTrace* t : {l, r}) {
+    if (!t) continue;
+    const double sign = t == l ? -1 : 1;
+    for (const auto& p : t->points) {
+      const double u = zero.lightAt(s.angles_deg[p.row]) - zero.axis_x_px;
+      rows.push_back({u, u * u * u * 1e-4, sign, sign * u * u * 1e-4, p.x_px - zero.axis_x_px});
+    }
+  }
+  const int unknowns = both ? 4 : 3;
+  if (static_cast<int>(rows.size()) < unknowns + 2) return std::nullopt;
+  Eigen::MatrixXd a(rows.size(), unknowns);
+  Eigen::VectorXd b(rows.size());
+  for (size_t i = 0; i < rows.size(); ++i) {
+    for (int j = 0; j < unknowns; ++j) a(i, j) = rows[i][j];
+    b(i) = rows[i][4];
+  }
+  const Eigen::VectorXd k = a.colPivHouseholderQr().solve(b);
+  BorderModel m{k(0), k(1), k(2), both ? k(3) : 0.0};
+  const double rms = std::sqrt((a * k - b).squaredNorm() / rows.size());
+  if (!(m.w0 > 1) || rms > o.max_centre_rms_px + 0.01 * m.w0) return std::nullopt;
+  return m;
 }
 
 }  // namespace
@@ -317,7 +373,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       pairs.push_back(std::move(pair));
     }
   }
-  keepPairsThroughTheZero(s, o, pairs);
+  const std::optional<ZeroOfPairs> zero = keepPairsThroughTheZero(s, o, pairs);
   std::sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return a.score < b.score; });
   std::vector<bool> used(traces.size(), false);
   struct Borders {
@@ -372,23 +428,47 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
     for (int k = 0; k < o.max_hidden_rows && c.last_row + 1 < s.rows() && hidden(c.last_row + 1); ++k) ++c.last_row;
     const int n = c.last_row - c.first_row + 1;
     std::vector<double> angles(s.angles_deg.begin() + c.first_row, s.angles_deg.begin() + c.last_row + 1);
-    std::vector<double> xl = l ? borderAt(*l, s, c.first_row, c.last_row) : std::vector<double>();
-    std::vector<double> xr = r ? borderAt(*r, s, c.first_row, c.last_row) : std::vector<double>();
+    // Its borders at every frame: a trace's own curve where it is traced, the border model
+    // elsewhere; without a model, a pair's traces extrapolated and a lone border's chord below.
+    const std::optional<BorderModel> model = zero ? fitBorderModel(s, *zero, l, r, o) : std::nullopt;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::vector<double> xl(n, nan), xr(n, nan);
+    c.left_seen.assign(n, false);
+    c.right_seen.assign(n, false);
+    for (const BorderTrace* t : {l, r}) {
+      if (!t) continue;
+      const std::vector<double> extrapolated = borderAt(*t, s, c.first_row, c.last_row);
+      for (int i = 0; i < n; ++i) {
+        const int row = c.first_row + i;
+        const bool traced = row >= t->firstRow() && row <= t->lastRow();
+        (t == l ? xl : xr)[i] = traced || !model ? extrapolated[i] : nan;
+        const double x = (t == l ? xl : xr)[i];
+        (t == l ? c.left_seen : c.right_seen)[i] = traced && x >= 0 && x <= s.width();
+      }
+    }
+    if (model)
+      for (int i = 0; i < n; ++i) {
+        const double u = zero->lightAt(angles[i]) - zero->axis_x_px;
+        const double m = model->middle(u, zero->axis_x_px), w = model->halfWidth(u);
+        if (!std::isfinite(xl[i])) xl[i] = m - w;
+        if (!std::isfinite(xr[i])) xr[i] = m + w;
+      }
     std::vector<double> steps;
     for (const BorderTrace* t : {l, r})
       if (t)
         for (const auto& p : t->points)
           if (p.jump > 0) steps.push_back(p.jump);
     c.step = median(steps);
-    // Half-heights from the vertical profiles, and a one-border ghost's unseen half from the
-    // curvature of its outline near the seen border (a circle through the chord there).
+    // Half-heights from the vertical profiles, and a one-border ghost's unseen half, without a
+    // border model, from the curvature of its outline near the seen border (a circle through the
+    // chord there).
     std::vector<double> height(n), middle(n), half(n), inside(n);
     for (int i = 0; i < n; ++i) {
       const int row = c.first_row + i;
       const cv::Mat& lum = lums[row];
       const cv::Mat& valid = stack.frames[row].valid;
       double a0, mx;
-      if (l && r) {
+      if (std::isfinite(xl[i]) && std::isfinite(xr[i])) {
         a0 = 0.5 * (xr[i] - xl[i]);
         mx = 0.5 * (xr[i] + xl[i]);
       } else {
@@ -413,8 +493,8 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
                               o.max_step_ratio);
       // The middle's brightness over the outside's (where the borders are in the frame).
       std::vector<double> outside;
-      if (l && xl[i] > 6) outside.push_back(meanOver(s, row, xl[i] - 5, xl[i] - 2));
-      if (r && xr[i] < s.width() - 6) outside.push_back(meanOver(s, row, xr[i] + 2, xr[i] + 5));
+      if (c.left_seen[i] && xl[i] > 6) outside.push_back(meanOver(s, row, xl[i] - 5, xl[i] - 2));
+      if (c.right_seen[i] && xr[i] < s.width() - 6) outside.push_back(meanOver(s, row, xr[i] + 2, xr[i] + 5));
       const double out_level = outside.empty() ? 0 : median(outside);
       inside[i] = mx >= 0 && mx < s.width() ? meanOver(s, row, mx - 2, mx + 2) - out_level
                                             : std::numeric_limits<double>::quiet_NaN();

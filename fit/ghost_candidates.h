@@ -22,8 +22,9 @@
 //
 // Each ghost gets its angle range (its traces' frames, and on while its borders are hidden in the
 // light's zone or beyond the frame) and, at every frame in it, a seed: Mx, L,
-// R from its borders (the unseen one from the other's distance to the ghost's middle, itself on
-// the model's odd curve about the optical axis where it can be), h from the vertical profile of
+// R from its borders, where a border is not traced from its border model (its middle an odd
+// function of the light's offset from the optical axis, its half-width an even one, fitted to all
+// the points of its traces), h from the vertical profile of
 // the frame through Mx (where it falls by the borders' step), Ib from the step, Ii from S in the
 // middle.
 
@@ -58,10 +59,13 @@ struct GhostCandidate {
   int left_trace = -1, right_trace = -1;  // BorderTrace ids; −1 where that border is never seen
   int first_row = 0, last_row = 0;        // sweep rows (the stack's frames) it is present in
   std::vector<model::GhostParameters> seeds;  // one per row first_row..last_row
+  std::vector<bool> left_seen, right_seen;    // per row: the sweep traced that border there, in the frame
   double step = 0;                        // median step of its borders in S (linear radiance)
 
   bool present(int row) const { return row >= first_row && row <= last_row; }
   const model::GhostParameters& seed(int row) const { return seeds[row - first_row]; }
+  bool leftSeen(int row) const { return left_seen[row - first_row]; }
+  bool rightSeen(int row) const { return right_seen[row - first_row]; }
 };
 
 struct CandidateSummary {

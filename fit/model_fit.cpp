@@ -200,6 +200,15 @@ class ModelResidual : public ceres::CostFunction {
   const ModelEquations& equations_;
 };
 
+// a − b.
+model::Polynomial difference(const model::Polynomial& a, const model::Polynomial& b) {
+  model::Polynomial d;
+  d.coefficients.assign(std::max(a.coefficients.size(), b.coefficients.size()), 0.0);
+  for (size_t i = 0; i < a.coefficients.size(); ++i) d.coefficients[i] += a.coefficients[i];
+  for (size_t i = 0; i < b.coefficients.size(); ++i) d.coefficients[i] -= b.coefficients[i];
+  return d;
+}
+
 // `p` as a polynomial that stays within bounds `b` over [lo, hi] (where the model file is
 // checked): where it strays, the least-squares polynomial through its values clamped to the
 // bounds, of the highest degree that stays within them.
@@ -274,8 +283,8 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   const double capture_min = m.capture.fieldAngle(stack.frames.front().angle_deg);
   const double capture_max = m.capture.fieldAngle(stack.frames.back().angle_deg);
 
-  // 1. Each parameter's robust polynomial over the frame fits, of the degree that predicts
-  // held-out fits best.
+  // 1. Each parameter's robust polynomial over the frame fits (for L and R, the borders'), of the
+  // degree that predicts held-out fits best.
   const auto t_poly = Clock::now();
   std::map<int, std::pair<std::vector<double>, std::vector<model::GhostParameters>>> samples;
   for (const auto& f : fits)
@@ -298,13 +307,36 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
       g.bounds.push_back(fitBounds(k, channels, stack.size, model::kUnbounded));
     g.angle_min = std::max(capture_min, m.capture.fieldAngle(stack.frames[c.first_row].angle_deg) - half_step);
     g.angle_max = std::min(capture_max, m.capture.fieldAngle(stack.frames[c.last_row].angle_deg) + half_step);
+    auto curve = [&](const std::vector<double>& values) {
+      const int degree = std::min(degreeByValidation(angles, values, o.min_degree, o.max_degree),
+                                  static_cast<int>(angles.size()) - 1);
+      return robustPolynomial(angles, values, degree);
+    };
+    // The borders, not the middle and half-widths, are what a frame measures where a ghost's
+    // other border is beyond it: x_L = Mx − L and x_R = Mx + R get curves of their own, and L and
+    // R are the differences of those from Mx's, so a well-measured border keeps its own degree.
+    std::vector<double> xl, xr, mx;
+    for (const auto& q : ghosts) {
+      xl.push_back(q.center_x - q.left);
+      xr.push_back(q.center_x + q.right);
+      mx.push_back(q.center_x);
+    }
+    const model::Polynomial middle = curve(mx);
     for (int k = 0; k < p; ++k) {
-      std::vector<double> values;
-      for (const auto& q : ghosts) values.push_back(model::toParameterVector(q)[k]);
-      int degree = k == model::param::kMy ? 0 : degreeByValidation(angles, values, o.min_degree, o.max_degree);
-      degree = std::min(degree, static_cast<int>(angles.size()) - 1);
-      const model::Polynomial poly =
-          k == model::param::kMy ? model::Polynomial{{horizon_y_px}} : robustPolynomial(angles, values, degree);
+      model::Polynomial poly;
+      if (k == model::param::kMy) {
+        poly = {{horizon_y_px}};
+      } else if (k == model::param::kMx) {
+        poly = middle;
+      } else if (k == model::param::kL) {
+        poly = difference(middle, curve(xl));
+      } else if (k == model::param::kR) {
+        poly = difference(curve(xr), middle);
+      } else {
+        std::vector<double> values;
+        for (const auto& q : ghosts) values.push_back(model::toParameterVector(q)[k]);
+        poly = curve(values);
+      }
       g.parameters.push_back(ScaledPolynomial::from(poly, g.angle_min, g.angle_max));
     }
     g.storeBlock();

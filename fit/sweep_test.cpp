@@ -77,5 +77,32 @@ TEST(GhostCandidates, PairTheBordersOfEachGhostAndSeedIt) {
   EXPECT_GE(summary.pairs, 2);
 }
 
+// A wide flat ghost whose left border never enters the frame: its right border's trace and the
+// optical zero (from the other ghosts' pairs) give its middle and half-width, so its hidden border
+// is seeded where it is, not from the curvature of the seen one (which is no circle's).
+TEST(GhostCandidates, AGhostWithOneBorderInTheFrameGetsTheOtherFromItsBorderModel) {
+  PanScene scene;
+  scene.ghosts = {{-0.8, 45, 0.01, 0.015}, {0.3, 150, 0.004, 0.004, 0.5}};
+  const FrameStack stack = scene.stack(anglesFrom(3, 8, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  const std::vector<GhostCandidate> candidates = findGhostCandidates(stack, sweep, findTraces(sweep));
+  int matched_frames = 0;
+  for (int row = 0; row < sweep.rows(); ++row) {
+    const auto p = scene.ghostAt(1, sweep.angles_deg[row]);
+    ASSERT_LT(p.center_x - p.left, 0);
+    for (const auto& c : candidates) {
+      if (!c.present(row) || c.leftSeen(row) || !c.rightSeen(row)) continue;
+      const auto& s = c.seed(row);
+      if (std::abs(s.center_x + s.right - (p.center_x + p.right)) < 1.5 &&
+          std::abs(s.center_x - s.left - (p.center_x - p.left)) < 0.05 * p.left) {
+        ++matched_frames;
+        break;
+      }
+    }
+  }
+  EXPECT_GE(matched_frames, 0.9 * sweep.rows());
+}
+
 }  // namespace
 }  // namespace flarekit::fit

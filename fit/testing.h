@@ -47,6 +47,7 @@ struct PanScene {
   double light_radius_px = 4;
   struct Ghost {
     double rate = 1, radius_px = 20, border = 0.01, inside = 0.005;
+    double height_ratio = 1;  // its half-height over its half-width
   };
   std::vector<Ghost> ghosts = {{1.6, 30, 0.02, 0.01}, {-0.8, 45, 0.01, 0.015}};
   double noise = 1e-4;
@@ -58,7 +59,8 @@ struct PanScene {
     model::GhostParameters p;
     p.center_x = axis_x + ghosts[g].rate * (lightX(angle_deg) - axis_x);
     p.center_y = horizon_y;
-    p.left = p.right = p.height = ghosts[g].radius_px;
+    p.left = p.right = ghosts[g].radius_px;
+    p.height = ghosts[g].height_ratio * ghosts[g].radius_px;
     p.border = {ghosts[g].border, 0, 0};
     p.inside = {ghosts[g].inside, 0, 0};
     p.inside_falloff = 0.4 * ghosts[g].radius_px;
