@@ -274,8 +274,8 @@ TEST(Exr, AttributeAfterAChannelListLongerThanItsSizeIsChecked) {
   }
 }
 
-// OpenEXR reads a float vector as the whole floats its size holds, leaving the 1–3 bytes over for
-// the next attribute's name; the check reads it so and finds the 1.9 GB attribute OpenEXR then sees
+// OpenEXR reads a float vector as the whole floats its size holds, leaving the bytes over for the
+// next attribute's name; the check reads it so and finds the oversized attribute OpenEXR then sees
 // (input found by fuzz/exr_fuzzer).
 TEST(Exr, AttributeAfterAFloatVectorOfOddSizeIsChecked) {
   const std::filesystem::path file =
