@@ -212,7 +212,8 @@ std::optional<ZeroOfPairs> keepPairsThroughTheZero(const SweepImage& s, const Ca
                                                    std::vector<Pair>& pairs) {
   const std::optional<model::Polynomial> light = lightCurve(s);
   if (!light || pairs.empty()) return std::nullopt;
-  auto light_at = [&](double angle) { return light->evaluate(std::tan(angle * std::numbers::pi / 180)); };
+  ZeroOfPairs zero{*light, 0};  // its axis is chosen below
+  auto light_at = [&](double angle) { return zero.lightAt(angle); };
   std::vector<Pair> off_light;
   for (auto& p : pairs) {
     double farthest = 0;
@@ -255,7 +256,8 @@ std::optional<ZeroOfPairs> keepPairsThroughTheZero(const SweepImage& s, const Ca
     if (fits(p, light_at(best_zero))) kept.push_back(std::move(p));
   pairs = std::move(kept);
   if (best_support <= 0) return std::nullopt;
-  return ZeroOfPairs{*light, light_at(best_zero)};
+  zero.axis_x_px = light_at(best_zero);
+  return zero;
 }
 
 // A ghost's borders over the whole capture. A rotationally symmetric lens images a light at −u
