@@ -17,6 +17,7 @@ void registerAcquisitionCommands(CLI::App& app);  // app/acquisition_commands.cp
 void registerModelCommands(CLI::App& app);        // app/model_commands.cpp
 void registerFitCommands(CLI::App& app);          // app/fit_commands.cpp
 void registerPredictCommands(CLI::App& app);      // app/predict_commands.cpp
+void registerViewCommands(CLI::App& app);         // app/view_commands.cpp
 void registerDemoCommand(CLI::App& app);          // app/demo_command.cpp
 
 // The "bench" subcommand that layers add their benchmarks to ("flarekit bench render ...").

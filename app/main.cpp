@@ -35,6 +35,7 @@ int main(int argc, char** argv) {
   app::registerModelCommands(app);
   app::registerFitCommands(app);
   app::registerPredictCommands(app);
+  app::registerViewCommands(app);
   app::registerDemoCommand(app);
 
   try {

@@ -23,6 +23,8 @@ using nlohmann::json;
 using testing::runFlarekit;
 using testing::runProgram;
 using testing::TempDir;
+using testing::chromiumArgs;
+using testing::consoleLines;
 
 const std::filesystem::path kSource = FLAREKIT_SOURCE_DIR;
 const std::filesystem::path kModel = kSource / "tests/data/predict/test_model.json";
@@ -33,22 +35,6 @@ int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin
 std::string readFile(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-// Chromium in headless mode with a fresh profile and no network services.
-std::vector<std::string> chromiumArgs(const std::filesystem::path& profile) {
-  return {"--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-          "--disable-background-networking", "--disable-component-update", "--disable-sync",
-          "--user-data-dir=" + profile.string(), "--enable-logging=stderr", "--v=0"};
-}
-
-// Console messages chromium logged for the page ("INFO:CONSOLE(...)" lines).
-std::vector<std::string> consoleLines(const std::string& err) {
-  std::vector<std::string> out;
-  std::istringstream in(err);
-  for (std::string line; std::getline(in, line);)
-    if (line.find(":CONSOLE") != std::string::npos) out.push_back(line);
-  return out;
 }
 
 TEST(CliPredict, WritesOverlayCompositeEstimatorsAndReport) {
@@ -89,7 +75,7 @@ TEST(CliPredict, ReportOpensOfflineInChromiumWithMapAndImages) {
   const std::string url = "file://" + (dir / "out/report.html").string();
 
   // The DOM after loading: no console messages, the map, both images and every light.
-  auto args = chromiumArgs(dir / "profile-dom");
+  auto args = chromiumArgs((dir / "profile-dom").string());
   args.push_back("--dump-dom");
   args.push_back(url);
   auto dom = runProgram("chromium", args, 120);
@@ -104,7 +90,7 @@ TEST(CliPredict, ReportOpensOfflineInChromiumWithMapAndImages) {
 
   // A screenshot: the composite appears as rendered (template match of the tone-mapped PNG at its
   // displayed size), and the polar map covers a large disc of the severity colours.
-  auto shot_args = chromiumArgs(dir / "profile-shot");
+  auto shot_args = chromiumArgs((dir / "profile-shot").string());
   const std::filesystem::path shot = dir / "shot.png";
   shot_args.push_back("--screenshot=" + shot.string());
   shot_args.push_back("--window-size=1400,2200");

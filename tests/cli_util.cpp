@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
 #include <stdexcept>
 
 extern char** environ;
@@ -100,6 +101,20 @@ bool onPath(const std::string& program) {
     start = end + 1;
   }
   return false;
+}
+
+std::vector<std::string> chromiumArgs(const std::string& profile) {
+  return {"--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+          "--disable-background-networking", "--disable-component-update", "--disable-sync",
+          "--user-data-dir=" + profile, "--enable-logging=stderr", "--v=0"};
+}
+
+std::vector<std::string> consoleLines(const std::string& err) {
+  std::vector<std::string> out;
+  std::istringstream in(err);
+  for (std::string line; std::getline(in, line);)
+    if (line.find(":CONSOLE") != std::string::npos) out.push_back(line);
+  return out;
 }
 
 }  // namespace flarekit::testing

@@ -19,4 +19,10 @@ CommandResult runFlarekit(const std::vector<std::string>& args, double timeout_s
 // True when `program` is on PATH.
 bool onPath(const std::string& program);
 
+// Arguments for Debian's chromium in headless mode with a fresh profile at `profile` and no
+// network services; the page's URL and what to do with it (--dump-dom, --screenshot=…) follow.
+std::vector<std::string> chromiumArgs(const std::string& profile);
+// The console messages chromium logged for the page ("INFO:CONSOLE(...)" lines of its stderr).
+std::vector<std::string> consoleLines(const std::string& err);
+
 }  // namespace flarekit::testing

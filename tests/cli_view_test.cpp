@@ -1,0 +1,109 @@
+// `flarekit view` and `flarekit export-shader` as a user meets them: the viewer in a real browser
+// (Debian's chromium, headless, WebGL2 on SwiftShader) draws what `flarekit render` draws, a
+// browser without WebGL2 gets a message, and bad models exit 2 with no page written.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "common/image.h"
+#include "common/testing.h"
+#include "model/flare_model.h"
+#include "tests/cli_util.h"
+#include "view/viewer_page.h"
+
+namespace flarekit {
+namespace {
+
+using testing::chromiumArgs;
+using testing::consoleLines;
+using testing::runFlarekit;
+using testing::runProgram;
+using testing::TempDir;
+
+const std::filesystem::path kSource = FLAREKIT_SOURCE_DIR;
+
+std::string readFile(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Chromium with WebGL2 on its software renderer (the packaged build has no GPU here).
+std::vector<std::string> webglArgs(const std::filesystem::path& profile) {
+  auto args = chromiumArgs(profile.string());
+  args.push_back("--use-angle=swiftshader");
+  args.push_back("--enable-unsafe-swiftshader");
+  return args;
+}
+
+// The page's console messages, less ANGLE's performance notes on the screenshot's read-back
+// ("GL Driver Message (OpenGL, Performance, …): GPU stall due to ReadPixels").
+std::vector<std::string> pageMessages(const std::string& err) {
+  std::vector<std::string> out;
+  for (const std::string& line : consoleLines(err))
+    if (line.find("GL Driver Message (OpenGL, Performance") == std::string::npos) out.push_back(line);
+  return out;
+}
+
+struct ViewCase {
+  std::string model;  // under the source tree
+  double theta_deg, phi_deg, ev;
+};
+
+class CliViewAgreement : public ::testing::TestWithParam<ViewCase> {};
+
+// The viewer at a fixed θ, φ and EV against `flarekit render` at the same angles and size after
+// the same tone map (common/image.h at the viewer's exposure): the 40 dB.
+TEST_P(CliViewAgreement, ViewerDrawsWhatRenderDraws) {
+  ASSERT_TRUE(testing::onPath("chromium")) << "chromium (Debian package) is missing; run scripts/setup.sh";
+  const ViewCase c = GetParam();
+  const std::filesystem::path model_file = kSource / c.model;
+  TempDir dir;
+  const auto page = dir / "view.html";
+  auto r = runFlarekit({"view", model_file.string(), "--out", page.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+
+  const cv::Size size(1280, 720);
+  auto args = webglArgs(dir / "profile");
+  const auto shot = dir / "shot.png";
+  args.push_back("--screenshot=" + shot.string());
+  args.push_back("--window-size=" + std::to_string(size.width) + "," + std::to_string(size.height));
+  args.push_back("--hide-scrollbars");
+  args.push_back("file://" + page.string() + "#theta=" + std::to_string(c.theta_deg) +
+                 "&phi=" + std::to_string(c.phi_deg) + "&ev=" + std::to_string(c.ev) + "&ui=0");
+  auto s = runProgram("chromium", args, 180);
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  EXPECT_TRUE(pageMessages(s.err).empty()) << pageMessages(s.err).front();
+  const cv::Mat viewer = cv::imread(shot.string());
+  ASSERT_EQ(viewer.size(), size) << "screenshot " << shot;
+
+  const model::FlareModel m = model::FlareModel::load(model_file);
+  ASSERT_FALSE(m.ghostsAt(c.theta_deg).empty()) << "pick an angle that shows ghosts";
+  PreviewOptions tone;
+  tone.fixed_scale = view::viewerExposureScale(m);
+  tone.exposure_ev = c.ev;
+  const cv::Mat rendered = tonemapForDisplay(m.render(c.theta_deg, c.phi_deg, size), tone);
+  const double psnr = cv::PSNR(viewer, rendered);
+  if (const char* keep = std::getenv("FLAREKIT_KEEP_SCREENSHOT")) {
+    cv::imwrite(std::string(keep) + "-viewer.png", viewer);
+    cv::imwrite(std::string(keep) + "-render.png", rendered);
+  }
+  std::cout << c.model << ": viewer against render " << psnr << " dB\n";
+  EXPECT_GE(psnr, 40.0) << c.model << " at θ = " << c.theta_deg << "°, φ = " << c.phi_deg << "°";
+  // Not a black frame that agrees by being empty: the flare covers a good part of the view.
+  cv::Mat grey;
+  cv::extractChannel(rendered, grey, 1);
+  EXPECT_GT(cv::countNonZero(grey > 8), size.area() / 50) << c.model;
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, CliViewAgreement,
+                         ::testing::Values(ViewCase{"tests/data/physics/heliar_tronnier_fitted.json", 3.0, -20.0, 0.0},
+                                           ViewCase{"tests/data/model/example_model.json", 8.0, 35.0, 1.0}));
+
+}  // namespace
+}  // namespace flarekit
