@@ -20,6 +20,7 @@
 #include "common/image.h"
 #include "common/log.h"
 #include "predict/report.h"
+#include "view/viewer_page.h"
 
 namespace flarekit::predict {
 namespace {
@@ -372,7 +373,8 @@ PredictionSummary predict(const model::FlareModel& m, const Scene& scene, const 
   s.model_file = model_file;
   s.out_dir = out_dir;
   namespace fs = std::filesystem;
-  const std::vector<std::string> names = {"overlay.exr", "composite.png", "estimators.json", "report.html"};
+  const std::vector<std::string> names = {"overlay.exr", "composite.png", "estimators.json", "report.html",
+                                          "view.html"};
   for (const auto& name : names) s.files.push_back(out_dir / name);
   std::error_code ec;
 
@@ -393,6 +395,9 @@ PredictionSummary predict(const model::FlareModel& m, const Scene& scene, const 
     writePreviewPng(staging / names[1], composite);
     writeJsonFile(staging / names[2], toJson(s));
     writeTextFileAtomically(staging / names[3], reportHtml(s, m, scene, composite, overlay));
+    view::ViewerOptions viewer;
+    viewer.source_name = model_file.filename().string();
+    writeTextFileAtomically(staging / names[4], view::viewerPage(m, viewer));
     for (const auto& name : names) {
       fs::rename(staging / name, out_dir / name, ec);
       if (ec) throw RuntimeError("cannot move " + name + " into " + out_dir.string() + ": " + ec.message());

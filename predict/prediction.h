@@ -170,8 +170,9 @@ PredictionSummary analyze(const model::FlareModel& model, const Scene& scene,
                           cv::Mat* composite = nullptr);
 
 // `flarekit predict`: analyze(), then writes into `out_dir` (created if missing) overlay.exr
-// (linear overlay, float), composite.png (tone-mapped background + overlay), estimators.json and
-// report.html (report.h). Throws InputError for invalid options, RuntimeError on I/O failure.
+// (linear overlay, float), composite.png (tone-mapped background + overlay), estimators.json,
+// report.html (report.h) and view.html (the real-time viewer the report links its lights to,
+// view/viewer_page.h). Throws InputError for invalid options, RuntimeError on I/O failure.
 PredictionSummary predict(const model::FlareModel& model, const Scene& scene,
                           const PredictOptions& options, const std::filesystem::path& out_dir,
                           const std::filesystem::path& model_file = {});

@@ -304,7 +304,8 @@ std::string reportHtml(const PredictionSummary& s, const model::FlareModel& m, c
   o << "<h2>Lights, most severe first</h2>\n<table id=\"lights\"><tr><th>rank</th><th class=\"l\">light</th>"
        "<th class=\"l\">status</th><th>θ (°)</th><th>φ (°)</th><th>in frame</th><th>l·α (lx)</th><th>B</th>"
        "<th>log2 B</th><th>ghosts</th><th>"
-    << escape(toString(s.map.estimator)) << "</th><th>percentile</th><th>max</th><th>contrast ratio</th></tr>\n";
+    << escape(toString(s.map.estimator))
+    << "</th><th>percentile</th><th>max</th><th>contrast ratio</th><th>viewer</th></tr>\n";
   std::vector<const LightPrediction*> ranked;
   for (const auto& p : s.lights) ranked.push_back(&p);
   std::sort(ranked.begin(), ranked.end(), [](auto* a, auto* b) { return a->rank < b->rank; });
@@ -317,7 +318,12 @@ std::string reportHtml(const PredictionSummary& s, const model::FlareModel& m, c
       << (lit ? fmt(p->brightness.scale, "%.3g") : "0") << "</td><td>"
       << (lit ? fmt(p->brightness.log2_scale, "%+.2f") : "–") << "</td><td>" << p->ghost_count << "</td><td>"
       << fmt(p->severity) << "</td><td>" << fmt(p->severity_percentile, "%.0f") << "</td><td>"
-      << fmt(p->estimators.max) << "</td><td>" << fmt(p->estimators.contrast_ratio, "%.3f") << "</td></tr>\n";
+      << fmt(p->estimators.max) << "</td><td>" << fmt(p->estimators.contrast_ratio, "%.3f") << "</td><td>";
+    // The real-time viewer beside the report (view/viewer_page.h) at this light's θ and φ.
+    if (p->geometry.status == LightStatus::kInRange)
+      o << cv::format("<a class=\"view\" href=\"view.html#theta=%.3f&amp;phi=%.2f&amp;ev=0\">open</a>",
+                      p->geometry.model_angle_deg, p->geometry.model_roll_deg);
+    o << "</td></tr>\n";
   }
   o << "</table>\n<p class=\"note\">θ: angle between the optical axis and the light; φ: roll of the flare about the "
        "image centre (0° = light left of centre, counter-clockwise). B: brightness scale of the paper's Eq. 2 against the "

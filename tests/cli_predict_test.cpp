@@ -85,6 +85,9 @@ TEST(CliPredict, ReportOpensOfflineInChromiumWithMapAndImages) {
   EXPECT_NE(dom.out.find("id=\"severity-timeline\""), std::string::npos);
   EXPECT_NE(dom.out.find("id=\"overlay\""), std::string::npos);
   EXPECT_NE(dom.out.find("data:image/png;base64,"), std::string::npos);
+  // Each light in range links to the viewer beside the report at its θ and φ.
+  EXPECT_TRUE(std::filesystem::exists(dir / "out/view.html"));
+  EXPECT_NE(dom.out.find("href=\"view.html#theta="), std::string::npos);
   for (const char* name : {"key spot", "practical lamp", "rim light", "window", "flood (off-stage)"})
     EXPECT_NE(dom.out.find(name), std::string::npos) << name;
 

@@ -3,6 +3,7 @@
 // browser without WebGL2 gets a message, and bad models exit 2 with no page written.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -104,6 +105,66 @@ TEST_P(CliViewAgreement, ViewerDrawsWhatRenderDraws) {
 INSTANTIATE_TEST_SUITE_P(Models, CliViewAgreement,
                          ::testing::Values(ViewCase{"tests/data/physics/heliar_tronnier_fitted.json", 3.0, -20.0, 0.0},
                                            ViewCase{"tests/data/model/example_model.json", 8.0, 35.0, 1.0}));
+
+// A browser without WebGL2 shows a message in place of a blank canvas.
+TEST(CliView, ABrowserWithoutWebgl2GetsAMessage) {
+  ASSERT_TRUE(testing::onPath("chromium")) << "chromium (Debian package) is missing; run scripts/setup.sh";
+  TempDir dir;
+  const auto page = dir / "view.html";
+  auto r = runFlarekit({"view", (kSource / "tests/data/model/example_model.json").string(), "--out", page.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto args = chromiumArgs((dir / "profile").string());
+  args.push_back("--disable-3d-apis");
+  args.push_back("--dump-dom");
+  args.push_back("file://" + page.string());
+  auto dom = runProgram("chromium", args, 120);
+  ASSERT_EQ(dom.exit_code, 0) << dom.err;
+  EXPECT_TRUE(pageMessages(dom.err).empty()) << pageMessages(dom.err).front();
+  EXPECT_NE(dom.out.find("This viewer needs WebGL2"), std::string::npos);
+}
+
+// export-shader writes the library with the model's coefficients and flare(); the viewer's page
+// carries the same text.
+TEST(CliView, ExportShaderWritesTheLibraryTheViewerDraws) {
+  TempDir dir;
+  const auto model_file = kSource / "tests/data/model/example_model.json";
+  auto r = runFlarekit({"export-shader", model_file.string(), "--out", (dir / "flare.glsl").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string glsl = readFile(dir / "flare.glsl");
+  EXPECT_NE(glsl.find("vec3 flare(vec2 uv, float theta, float phi)"), std::string::npos);
+  EXPECT_NE(glsl.find("const int FLARE_GHOSTS = " +
+                      std::to_string(model::FlareModel::load(model_file).ghosts.size()) + ";"),
+            std::string::npos);
+  r = runFlarekit({"view", model_file.string(), "--out", (dir / "view.html").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string page = readFile(dir / "view.html");
+  // The page holds the library as a JSON string: compare one line that needs no escaping.
+  const std::string line = glsl.substr(glsl.find("const float FLARE_COEFFICIENTS"), 60);
+  EXPECT_NE(page.find(line), std::string::npos) << line;
+}
+
+// A model that is malformed or of an unknown version: one line naming the file, exit 2, and no
+// page or shader written.
+TEST(CliView, BadModelsExit2WithOneLineAndWriteNothing) {
+  TempDir dir;
+  const auto broken = dir / "broken.json";
+  std::ofstream(broken) << "{\"format\": \"flarekit.flare-model\", \"version\": 2, ";
+  std::string text = readFile(kSource / "tests/data/model/example_model.json");
+  const size_t at = text.find("\"version\"");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, text.find(',', at) - at, "\"version\": 99");
+  const auto future = dir / "future.json";
+  std::ofstream(future) << text;
+  for (const auto& file : {broken, future, dir / "missing.json"})
+    for (const std::string command : {"view", "export-shader"}) {
+      const auto out = dir / (command + ".out");
+      auto r = runFlarekit({command, file.string(), "--out", out.string()});
+      EXPECT_EQ(r.exit_code, 2) << command << " " << file << ": " << r.err;
+      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+      EXPECT_NE(r.err.find(file.filename().string()), std::string::npos) << r.err;
+      EXPECT_FALSE(std::filesystem::exists(out)) << out;
+    }
+}
 
 }  // namespace
 }  // namespace flarekit
