@@ -155,12 +155,16 @@ bool flareInside(FlareGhost g, vec2 r) {
   if (r.x < -g.left || r.x > g.right || r.y < -g.height) return false;
   vec2 a0, a1, a2, a3;
   flareSegment(g, r.x <= 0.0 ? 0 : 1, a0, a1, a2, a3);
+  // Safeguarded Newton on x(t) = r.x from the straight-line guess, as model/ does.
   float lo = 0.0, hi = 1.0;
-  for (int i = 0; i < 24; ++i) {
-    float t = 0.5 * (lo + hi);
-    if (((a3.x * t + a2.x) * t + a1.x) * t + a0.x > r.x) hi = t; else lo = t;
+  float t = clamp(r.x <= 0.0 ? 1.0 + r.x / g.left : r.x / g.right, 0.0, 1.0);
+  for (int i = 0; i < 8; ++i) {
+    float f = ((a3.x * t + a2.x) * t + a1.x) * t + a0.x - r.x;
+    if (f > 0.0) hi = t; else lo = t;
+    float fp = (3.0 * a3.x * t + 2.0 * a2.x) * t + a1.x;
+    float next = fp > 0.0 ? t - f / fp : 0.5 * (lo + hi);
+    t = (next >= lo && next <= hi) ? next : 0.5 * (lo + hi);
   }
-  float t = 0.5 * (lo + hi);
   return r.y >= ((a3.y * t + a2.y) * t + a1.y) * t + a0.y;
 }
 
@@ -184,23 +188,30 @@ vec3 flareGhostValue(FlareGhost g, vec2 q) {
   return tau >= 1.0 ? vec3(0.0) : g.border * (1.0 - pow(tau, g.outside_exponent));
 }
 
-// The pedestal at capture point q and field angle θ (model/pedestal.h), taken at the nearest
-// point of the capture's frame; 0 where the model has none or θ is outside its range.
+// The pedestal at field angle θ (model/pedestal.h): c[k] multiplies term k of (1, u, v, u², uv, v²)
+// per channel; false (and all 0) where the model has none or θ is outside its range.
+bool flarePedestalAt(float theta, out vec3 c[6]) {
+  for (int k = 0; k < 6; ++k) c[k] = vec3(0.0);
+  if (!FLARE_HAS_PEDESTAL || theta < FLARE_PEDESTAL_RANGE.x || theta > FLARE_PEDESTAL_RANGE.y) return false;
+  for (int ch = 0; ch < FLARE_CHANNELS; ++ch)
+    for (int k = 0; k < 6; ++k) c[k][ch] = flarePedestalPolynomial((ch * 6 + k) * FLARE_TERMS, theta);
+  if (FLARE_CHANNELS == 1)
+    for (int k = 0; k < 6; ++k) c[k] = vec3(c[k].x);
+  return true;
+}
+
+// The pedestal of coefficients c at capture point q, taken at the nearest point of the capture's
+// frame: u = (x − W/2) / W, v = (y − H/2) / W.
+vec3 flarePedestalValue(vec3 c[6], vec2 q) {
+  vec2 p = clamp(q, vec2(0.0), FLARE_CAPTURE_SIZE);
+  float u = (p.x - 0.5 * FLARE_CAPTURE_SIZE.x) / FLARE_CAPTURE_SIZE.x;
+  float v = (p.y - 0.5 * FLARE_CAPTURE_SIZE.y) / FLARE_CAPTURE_SIZE.x;
+  return c[0] + c[1] * u + c[2] * v + c[3] * (u * u) + c[4] * (u * v) + c[5] * (v * v);
+}
+
 vec3 flarePedestal(vec2 q, float theta) {
-  if (!FLARE_HAS_PEDESTAL || theta < FLARE_PEDESTAL_RANGE.x || theta > FLARE_PEDESTAL_RANGE.y)
-    return vec3(0.0);
-  vec2 c = clamp(q, vec2(0.0), FLARE_CAPTURE_SIZE);
-  float u = (c.x - 0.5 * FLARE_CAPTURE_SIZE.x) / FLARE_CAPTURE_SIZE.x;
-  float v = (c.y - 0.5 * FLARE_CAPTURE_SIZE.y) / FLARE_CAPTURE_SIZE.x;
-  float terms[6] = float[](1.0, u, v, u * u, u * v, v * v);
-  vec3 value = vec3(0.0);
-  for (int ch = 0; ch < FLARE_CHANNELS; ++ch) {
-    float sum = 0.0;
-    for (int k = 0; k < 6; ++k)
-      sum += flarePedestalPolynomial((ch * 6 + k) * FLARE_TERMS, theta) * terms[k];
-    value[ch] = sum;
-  }
-  return FLARE_CHANNELS == 1 ? vec3(value.x) : value;
+  vec3 c[6];
+  return flarePedestalAt(theta, c) ? flarePedestalValue(c, q) : vec3(0.0);
 }
 
 // The capture point an image point shows: uv is the offset from the image's centre in image

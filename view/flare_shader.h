@@ -28,9 +28,9 @@ namespace flarekit::view {
 
 struct FlareShaderOptions {
   // Samples of each upper-half Bézier segment from which the nearest point is refined (≥ 4).
-  int samples_per_segment = 24;
+  int samples_per_segment = 12;
   // Safeguarded Newton steps refining the nearest point (≥ 1).
-  int newton_steps = 8;
+  int newton_steps = 6;
   // Shown in the library's first comment line: where the model came from.
   std::string source_name;
 
