@@ -148,6 +148,69 @@ TEST(CliView, ExportShaderWritesTheLibraryTheViewerDraws) {
   EXPECT_NE(page.find(line), std::string::npos) << line;
 }
 
+// What an engine does with export-shader's file: one full-screen pass calling flare(uv, θ, φ) at
+// every pixel, tone-mapped as flarekit's pictures are. The page is the test's own.
+std::string enginePage(const std::string& glsl, double theta, double phi, double scale) {
+  return R"(<!doctype html><html><body style="margin:0;overflow:hidden"><canvas id="c" width="640" height="360"></canvas>
+<script type="x-shader/x-fragment" id="fs">#version 300 es
+precision highp float;
+precision highp int;
+)" + glsl + R"(
+out vec4 color;
+float encode(float v) { v = v / (1.0 + v); return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055; }
+void main() {
+  vec2 size = vec2(640.0, 360.0), pixel = vec2(gl_FragCoord.x, size.y - gl_FragCoord.y);
+  vec3 v = flare((pixel - 0.5 * size) / size.x, )" + std::to_string(theta) + ", " + std::to_string(phi) + R"() * )" +
+         std::to_string(scale) + R"(;
+  color = vec4(encode(v.r), encode(v.g), encode(v.b), 1.0);
+}</script>
+<script>
+const gl = document.getElementById("c").getContext("webgl2");
+const p = gl.createProgram();
+for (const [type, text] of [[gl.VERTEX_SHADER, "#version 300 es\nvoid main() { gl_Position = vec4(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0, 0.0, 1.0); }"],
+                            [gl.FRAGMENT_SHADER, document.getElementById("fs").textContent]]) {
+  const s = gl.createShader(type);
+  gl.shaderSource(s, text);
+  gl.compileShader(s);
+  if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) console.log("compile: " + gl.getShaderInfoLog(s));
+  gl.attachShader(p, s);
+}
+gl.linkProgram(p);
+gl.useProgram(p);
+gl.drawArrays(gl.TRIANGLES, 0, 3);
+</script></body></html>)";
+}
+
+TEST(CliView, ExportedFlareFunctionDrawsWhatRenderDraws) {
+  ASSERT_TRUE(testing::onPath("chromium")) << "chromium (Debian package) is missing; run scripts/setup.sh";
+  TempDir dir;
+  const auto model_file = kSource / "tests/data/view/tessar_rggb_model.json";
+  auto r = runFlarekit({"export-shader", model_file.string(), "--out", (dir / "flare.glsl").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const model::FlareModel m = model::FlareModel::load(model_file);
+  const double theta = 7, phi = 150, scale = view::viewerExposureScale(m);
+  std::ofstream(dir / "engine.html") << enginePage(readFile(dir / "flare.glsl"), theta, phi, scale);
+  auto args = webglArgs(dir / "profile");
+  args.push_back("--screenshot=" + (dir / "shot.png").string());
+  args.push_back("--window-size=640,360");
+  args.push_back("--hide-scrollbars");
+  args.push_back("file://" + (dir / "engine.html").string());
+  auto s = runProgram("chromium", args, 180);
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  EXPECT_TRUE(pageMessages(s.err).empty()) << pageMessages(s.err).front();
+  const cv::Mat shot = cv::imread((dir / "shot.png").string());
+  ASSERT_EQ(shot.size(), cv::Size(640, 360));
+  PreviewOptions tone;
+  tone.fixed_scale = scale;
+  const cv::Mat rendered = tonemapForDisplay(m.render(theta, phi, cv::Size(640, 360)), tone);
+  const double psnr = cv::PSNR(shot, rendered);
+  std::cout << "flare() against render " << psnr << " dB\n";
+  EXPECT_GE(psnr, 40.0);
+  cv::Mat grey;
+  cv::extractChannel(rendered, grey, 1);
+  EXPECT_GT(cv::countNonZero(grey > 8), grey.total() / 50);
+}
+
 // A model that is malformed or of an unknown version: one line naming the file, exit 2, and no
 // page or shader written.
 TEST(CliView, BadModelsExit2WithOneLineAndWriteNothing) {
