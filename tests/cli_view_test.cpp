@@ -11,6 +11,7 @@
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "common/image.h"
 #include "common/testing.h"
@@ -110,6 +111,68 @@ INSTANTIATE_TEST_SUITE_P(Models, CliViewAgreement,
                                            ViewCase{"tests/data/view/tessar_rggb_model.json", 6.0, 30.0, 0.0},
                                            ViewCase{"tests/data/view/nikon_model.json", 10.0, -40.0, 0.0},
                                            ViewCase{"tests/data/model/example_model.json", 8.0, 35.0, 1.0}));
+
+// A background chosen by the user lies under the flare: its sRGB pixels as linear light, covering
+// the window, added before the tone map. The page's own file input cannot be driven headless, so
+// the test hands the image to the function the input calls.
+TEST(CliView, BackgroundIsCompositedUnderTheFlareBeforeTheToneMap) {
+  ASSERT_TRUE(testing::onPath("chromium")) << "chromium (Debian package) is missing; run scripts/setup.sh";
+  TempDir dir;
+  const auto model_file = kSource / "tests/data/view/demo_model.json";
+  auto r = runFlarekit({"view", model_file.string(), "--out", (dir / "view.html").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // A 320×180 background with detail (a gradient and a checkerboard), shown at 4× to cover 1280×720.
+  cv::Mat background(180, 320, CV_8UC3);
+  for (int y = 0; y < background.rows; ++y)
+    for (int x = 0; x < background.cols; ++x)
+      background.at<cv::Vec3b>(y, x) = ((x / 20 + y / 20) % 2) ? cv::Vec3b(40, 120, 200) : cv::Vec3b(x * 255 / 319, 60, y * 255 / 179);
+  ASSERT_TRUE(cv::imwrite((dir / "background.png").string(), background));
+  std::string page = readFile(dir / "view.html");
+  const std::string marker = "start();\n</script>";
+  ASSERT_NE(page.find(marker), std::string::npos);
+  page.replace(page.find(marker), marker.size(),
+               "start();\nfetch(\"background.png\").then((r) => r.blob())"
+               ".then((b) => loadBackground(new File([b], \"background.png\")));\n</script>");
+  std::ofstream(dir / "view.html", std::ios::trunc) << page;
+
+  const double theta = 6, phi = 20;
+  auto args = webglArgs(dir / "profile");
+  args.push_back("--screenshot=" + (dir / "shot.png").string());
+  args.push_back("--window-size=1280,720");
+  args.push_back("--hide-scrollbars");
+  args.push_back("--virtual-time-budget=10000");  // the image loads after the first frame
+  args.push_back("--allow-file-access-from-files");  // for the page's fetch of background.png
+  args.push_back("file://" + (dir / "view.html").string() + "#theta=6&phi=20&ev=0&ui=0");
+  auto s = runProgram("chromium", args, 180);
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  EXPECT_TRUE(pageMessages(s.err).empty()) << pageMessages(s.err).front();
+  const cv::Mat shot = cv::imread((dir / "shot.png").string());
+  ASSERT_EQ(shot.size(), cv::Size(1280, 720));
+
+  // The same on the CPU: the background decoded from sRGB and scaled up 4× (bilinear, as the GPU
+  // samples it), in the viewer's display units (1/scale of the flare's), under the render.
+  const model::FlareModel m = model::FlareModel::load(model_file);
+  const double scale = view::viewerExposureScale(m);
+  cv::Mat linear(background.size(), CV_32FC3);
+  for (int y = 0; y < background.rows; ++y)
+    for (int x = 0; x < background.cols; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const double v = background.at<cv::Vec3b>(y, x)[2 - c] / 255.0;  // BGR to RGB
+        linear.at<cv::Vec3f>(y, x)[c] = static_cast<float>(v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4));
+      }
+  cv::Mat shown;
+  cv::resize(linear, shown, {1280, 720}, 0, 0, cv::INTER_LINEAR);
+  cv::Mat flare = m.render(theta, phi, cv::Size(1280, 720));
+  if (flare.channels() == 1) cv::cvtColor(flare, flare, cv::COLOR_GRAY2RGB);
+  PreviewOptions tone;
+  tone.fixed_scale = scale;
+  const cv::Mat expected = tonemapForDisplay(flare + shown / scale, tone);
+  const double psnr = cv::PSNR(shot, expected);
+  std::cout << "viewer with a background against the CPU composite " << psnr << " dB\n";
+  EXPECT_GE(psnr, 40.0);
+  // The flare alone would not agree: the background shows.
+  EXPECT_LT(cv::PSNR(shot, tonemapForDisplay(flare, tone)), 30.0);
+}
 
 // A browser without WebGL2 shows a message in place of a blank canvas.
 TEST(CliView, ABrowserWithoutWebgl2GetsAMessage) {
