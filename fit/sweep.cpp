@@ -228,11 +228,17 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
     const double edge = std::isfinite(left) && std::isfinite(right) ? std::max(left, right)
                         : std::isfinite(left)                       ? left
                                                                     : right;
-    // The light's zone: its clipped core (no profile there), out from its centre.
+    // The light's zone: its core, out from its centre: where it clips (no profile there), and
+    // at least the core the horizon found (clipped, or above half the light's peak), which a
+    // merged HDR frame may hold without clipping.
+    std::vector<float> core_radii;
+    for (const LightImage& l : horizon.lights)
+      if (l.found) core_radii.push_back(static_cast<float>(l.core_radius_px));
+    const double core = core_radii.empty() ? 0.0 : quantile(core_radii, 0.5);
     for (int side : {-1, 1}) {
       int d = 0;
       while (d + 1 <= window && !std::isfinite(profile[window + side * (d + 1)])) ++d;
-      (side < 0 ? s.light_zone_left_px : s.light_zone_right_px) = d;
+      (side < 0 ? s.light_zone_left_px : s.light_zone_right_px) = std::max<double>(d, core);
     }
     if (std::isfinite(edge))
       for (double& p : profile) p = std::isfinite(p) ? std::max(0.0, p - edge) : 0.0;

@@ -9,8 +9,9 @@
 //
 // The light's own profile along the horizon is the same in every frame that shows it, moved with
 // the light: its percentile over those frames, at each distance from the light's centre, is taken
-// out of S, so that its halo and the fringes of its starburst draw no borders; its zone, the
-// clipped core on the horizon, is masked.
+// out of S, so that its halo and the fringes of its starburst draw no borders; its zone, its
+// core on the horizon (clipped, or above half its peak where a merged frame holds it unclipped),
+// is masked.
 //
 // Borders are edges along x: the derivative of Gaussian of log S less its running median over
 // ±2 trend_sigma_px (the smooth slope under the borders, which is no border), in σ of its noise

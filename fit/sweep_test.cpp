@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "fit/ghost_candidates.h"
 #include "fit/testing.h"
 
@@ -44,6 +46,26 @@ TEST(Sweep, EveryBorderIsATraceAtItsPlace) {
       }
       EXPECT_GE(found, 0.9 * inside) << "ghost " << g << (side == BorderSide::kLeft ? " left" : " right");
     }
+}
+
+// A merged HDR frame may hold the light without clipping it: its core is still the light's zone,
+// where it draws no border of its own (its fall-off would otherwise pass for a ghost's edge).
+TEST(Sweep, AnUnclippedLightsCoreIsItsZoneAndDrawsNoBorder) {
+  PanScene scene;
+  scene.light_clipped = false;
+  scene.light_radius_px = 4;  // σ of the light's Gaussian; its core (above half its peak) 4.7 px
+  scene.light_peak = 20;
+  const FrameStack stack = scene.stack(anglesFrom(0, 6, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  const double core = scene.light_radius_px * std::sqrt(2 * std::log(2.0));
+  EXPECT_GE(sweep.light_zone_left_px, core - 1);
+  EXPECT_GE(sweep.light_zone_right_px, core - 1);
+  int in_core = 0;
+  for (const auto& t : findTraces(sweep))
+    for (const auto& p : t.points)
+      if (std::abs(p.x_px - scene.lightX(sweep.angles_deg[p.row])) < core) ++in_core;
+  EXPECT_EQ(in_core, 0);
 }
 
 TEST(GhostCandidates, PairTheBordersOfEachGhostAndSeedIt) {

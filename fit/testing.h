@@ -45,6 +45,10 @@ struct PanScene {
   double angle_zero_deg = 0.3;               // θ0
   double focal_px = 1000;
   double light_radius_px = 4;
+  // Clipped: the light's disc of light_radius_px at 1, masked. Not clipped (a merged HDR frame):
+  // a Gaussian of that σ, peak light_peak, valid everywhere.
+  bool light_clipped = true;
+  double light_peak = 0.5;
   struct Ghost {
     double rate = 1, radius_px = 20, border = 0.01, inside = 0.005;
     double height_ratio = 1;  // its half-height over its half-width
@@ -86,11 +90,15 @@ struct PanScene {
       f.valid = cv::Mat(size, CV_8U, cv::Scalar(255));
       const cv::Point2d light(lightX(angles_deg[i]), horizon_y);
       for (int y = 0; y < size.height; ++y)
-        for (int x = 0; x < size.width; ++x)
-          if (std::hypot(x + 0.5 - light.x, y + 0.5 - light.y) <= light_radius_px) {
+        for (int x = 0; x < size.width; ++x) {
+          const double r = std::hypot(x + 0.5 - light.x, y + 0.5 - light.y);
+          if (!light_clipped) {
+            f.image.at<float>(y, x) += static_cast<float>(light_peak * std::exp(-0.5 * r * r / (light_radius_px * light_radius_px)));
+          } else if (r <= light_radius_px) {
             f.image.at<float>(y, x) = 1;
             f.valid.at<uchar>(y, x) = 0;
           }
+        }
       s.frames.push_back(std::move(f));
     }
     s.info.image_size = size;
