@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <map>
 
 #include <ceres/ceres.h>
@@ -200,6 +201,187 @@ class ModelResidual : public ceres::CostFunction {
   const ModelEquations& equations_;
 };
 
+// One fitted frame's shade problem for the model's outlines (fit/shade.h ShadeEquations).
+struct ShadeFrame {
+  double angle = 0;          // field angle
+  std::vector<int> present;  // indices into the curves, in the equations' order
+  ShadeEquations equations;
+};
+
+// Where each ghost's shade coefficients sit among the unknowns of the joint shade solve: Ib's
+// (degree + 1) coefficients from start, then Ii's; degree −1: no unknowns (no frame of it used).
+struct ShadeUnknowns {
+  std::vector<int> start, degree;
+  int total = 0;
+};
+
+// The unknowns of the joint shade solve over the frames `use` selects, at `degree` (each ghost's
+// lowered to what its frames there allow).
+ShadeUnknowns shadeUnknowns(size_t ghosts, const std::vector<ShadeFrame>& frames,
+                            const std::vector<bool>& use, int degree) {
+  std::vector<int> count(ghosts, 0);
+  for (size_t i = 0; i < frames.size(); ++i)
+    if (use[i])
+      for (int g : frames[i].present) ++count[g];
+  ShadeUnknowns u;
+  for (size_t g = 0; g < ghosts; ++g) {
+    u.start.push_back(u.total);
+    u.degree.push_back(std::min(degree, count[g] - 1));
+    u.total += 2 * (u.degree.back() + 1);
+  }
+  return u;
+}
+
+// u⁰ … u^degree at field angle θ, u the ghost's scaled angle: its shade coefficients' weights.
+std::vector<double> powers(const GhostCurves& c, double angle, int degree) {
+  std::vector<double> p(static_cast<size_t>(std::max(degree + 1, 0)));
+  const double u = c.parameters[model::param::kMx].variable(angle);
+  double power = 1;
+  for (auto& v : p) v = power, power *= u;
+  return p;
+}
+
+// Least-squares coefficients of every ghost's Ib and Ii in channel c over the frames `use` selects.
+Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::vector<ShadeFrame>& frames,
+                            const std::vector<bool>& use, const ShadeUnknowns& u, int c) {
+  Eigen::MatrixXd n = Eigen::MatrixXd::Zero(u.total, u.total);
+  Eigen::VectorXd r = Eigen::VectorXd::Zero(u.total);
+  for (size_t f = 0; f < frames.size(); ++f) {
+    if (!use[f]) continue;
+    const auto& sf = frames[f];
+    const Eigen::MatrixXd& nf = sf.equations.normal[c];
+    const Eigen::VectorXd& rf = sf.equations.rhs[c];
+    for (size_t j = 0; j < sf.present.size(); ++j) {
+      const int gj = sf.present[j], dj = u.degree[gj];
+      const auto pj = powers(curves[gj], sf.angle, dj);
+      for (int q = 0; q < 2; ++q)
+        for (int a = 0; a <= dj; ++a) {
+          const int row = u.start[gj] + q * (dj + 1) + a;
+          r(row) += pj[a] * rf(2 * j + q);
+          for (size_t i = 0; i < sf.present.size(); ++i) {
+            const int gi = sf.present[i], di = u.degree[gi];
+            const auto pi = powers(curves[gi], sf.angle, di);
+            for (int p = 0; p < 2; ++p)
+              for (int b = 0; b <= di; ++b)
+                n(row, u.start[gi] + p * (di + 1) + b) += pj[a] * pi[b] * nf(2 * j + q, 2 * i + p);
+          }
+        }
+    }
+  }
+  // Shades are ≥ 0 (the model file holds them so over each ghost's range): where a polynomial
+  // dips below, it is held at its lowest point and all are solved again (with the held points as
+  // equality constraints), until none dips. Held a hair above 0, not at it, so that rounding in
+  // the model file's powers of θ cannot take it below. Checked where the model file is checked.
+  constexpr int kChecks = 129;
+  constexpr double kHeldAt = 1e-6;  // of the brightest shade
+  std::vector<Eigen::VectorXd> held;
+  Eigen::VectorXd x = n.completeOrthogonalDecomposition().solve(r);
+  // Polynomial `q` of ghost g at check i.
+  auto value = [&](size_t g, int q, int i) {
+    const int d = u.degree[g], first = u.start[g] + q * (d + 1);
+    const double v = -1 + 2.0 * i / (kChecks - 1);
+    double sum = 0;
+    for (int a = d; a >= 0; --a) sum = sum * v + x(first + a);
+    return sum;
+  };
+  double brightest = 0;
+  for (size_t g = 0; g < curves.size(); ++g)
+    for (int q = 0; q < 2 && u.degree[g] >= 0; ++q)
+      for (int i = 0; i < kChecks; ++i) brightest = std::max(brightest, std::abs(value(g, q, i)));
+  for (int round = 0; round < u.total; ++round) {
+    bool dipped = false;
+    for (size_t g = 0; g < curves.size(); ++g) {
+      const int d = u.degree[g];
+      for (int q = 0; q < 2 && d >= 0; ++q) {
+        double lowest = 0;
+        int at = 0;
+        for (int i = 0; i < kChecks; ++i)
+          if (const double v = value(g, q, i); v < lowest) lowest = v, at = i;
+        if (lowest >= 0) continue;
+        Eigen::VectorXd row = Eigen::VectorXd::Zero(u.total);
+        for (int a = 0; a <= d; ++a)
+          row(u.start[g] + q * (d + 1) + a) = std::pow(-1 + 2.0 * at / (kChecks - 1), a);
+        held.push_back(row);
+        dipped = true;
+      }
+    }
+    if (!dipped) break;
+    const int h = static_cast<int>(held.size());
+    Eigen::MatrixXd kkt = Eigen::MatrixXd::Zero(u.total + h, u.total + h);
+    kkt.topLeftCorner(u.total, u.total) = n;
+    for (int j = 0; j < h; ++j) {
+      kkt.block(u.total + j, 0, 1, u.total) = held[j].transpose();
+      kkt.block(0, u.total + j, u.total, 1) = held[j];
+    }
+    Eigen::VectorXd rhs = Eigen::VectorXd::Constant(u.total + h, kHeldAt * brightest);
+    rhs.head(u.total) = r;
+    x = kkt.completeOrthogonalDecomposition().solve(rhs).head(u.total);
+  }
+  return x;
+}
+
+// The frames' shades (Ib, Ii per present ghost) that coefficients `x` give in channel c.
+Eigen::VectorXd shadesAt(const std::vector<GhostCurves>& curves, const ShadeFrame& sf,
+                         const ShadeUnknowns& u, const Eigen::VectorXd& x) {
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(2 * static_cast<Eigen::Index>(sf.present.size()));
+  for (size_t j = 0; j < sf.present.size(); ++j) {
+    const int g = sf.present[j], d = u.degree[g];
+    const auto p = powers(curves[g], sf.angle, d);
+    for (int q = 0; q < 2; ++q)
+      for (int a = 0; a <= d; ++a) v(2 * j + q) += p[a] * x(u.start[g] + q * (d + 1) + a);
+  }
+  return v;
+}
+
+// Every ghost's shade polynomials at once: the model's image is linear in their coefficients, so
+// the frames' shade equations summed over θ solve them by one linear least squares per channel,
+// and the light overlapping ghosts share is split as stays smooth over θ (per-frame values,
+// traded between them from frame to frame, are not). One degree for all, the one whose fit on
+// every other frame predicts the others' pixels best.
+void solveShadeCurves(std::vector<GhostCurves>& curves, const std::vector<ShadeFrame>& frames,
+                      int channels, int min_degree, int max_degree) {
+  const size_t n = frames.size();
+  std::vector<bool> all(n);
+  for (size_t i = 0; i < n; ++i) all[i] = !frames[i].present.empty();
+  int best_degree = min_degree;
+  double best_error = std::numeric_limits<double>::infinity();
+  for (int degree = min_degree; degree <= max_degree; ++degree) {
+    // Held-out error up to a constant: xᵀ N x − 2 xᵀ r over the frames left out.
+    double error = 0;
+    for (int fold = 0; fold < 2; ++fold) {
+      std::vector<bool> fit(n), held(n);
+      for (size_t i = 0; i < n; ++i) (i % 2 == static_cast<size_t>(fold) ? fit : held)[i] = all[i];
+      const ShadeUnknowns u = shadeUnknowns(curves.size(), frames, fit, degree);
+      for (int c = 0; c < channels; ++c) {
+        const Eigen::VectorXd x = solveShades(curves, frames, fit, u, c);
+        for (size_t i = 0; i < n; ++i)
+          if (held[i]) {
+            const Eigen::VectorXd v = shadesAt(curves, frames[i], u, x);
+            error += v.dot(frames[i].equations.normal[c] * v) - 2 * v.dot(frames[i].equations.rhs[c]);
+          }
+      }
+    }
+    if (error < best_error) best_error = error, best_degree = degree;
+  }
+  const ShadeUnknowns u = shadeUnknowns(curves.size(), frames, all, best_degree);
+  const model::ParameterLayout layout{channels};
+  for (int c = 0; c < channels; ++c) {
+    const Eigen::VectorXd x = solveShades(curves, frames, all, u, c);
+    for (size_t g = 0; g < curves.size(); ++g) {
+      const int d = u.degree[g];
+      if (d < 0) continue;
+      for (int q = 0; q < 2; ++q) {
+        auto& p = curves[g].parameters[q == 0 ? layout.ib(c) : layout.ii(c)];
+        const double centre = curves[g].parameters[model::param::kMx].centre;
+        const double scale = curves[g].parameters[model::param::kMx].scale;
+        p.centre = centre;
+        p.scale = scale;
+        p.coefficients.assign(x.data() + u.start[g] + q * (d + 1), x.data() + u.start[g] + (q + 1) * (d + 1));
+      }
+    }
+  }
+}
+
 // a − b.
 model::Polynomial difference(const model::Polynomial& a, const model::Polynomial& b) {
   model::Polynomial d;
@@ -342,48 +524,28 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     g.storeBlock();
     curves.push_back(std::move(g));
   }
-  // The shades again, for the model's own outlines: every fitted frame's Ib and Ii solved together
-  // with its pedestal (fit/shade.h) for the polynomials' shapes there, then their polynomials. A
+  // The shades again, for the model's own outlines: every fitted frame's shade problem for the
+  // polynomials' shapes there (fit/shade.h), then all the shade polynomials at once from them. A
   // frame fit's shade answers to its own outline; the model's to the polynomials'.
   if (o.reshade && !curves.empty()) {
-    std::vector<std::vector<std::pair<int, model::GhostParameters>>> shaded(fits.size());
+    std::vector<ShadeFrame> frames(fits.size());
     std::vector<model::Pedestal> pedestals(fits.size());
     tbb::parallel_for(size_t{0}, fits.size(), [&](size_t i) {
-      const double angle = m.capture.fieldAngle(fits[i].angle_deg);
-      std::vector<int> present;
+      ShadeFrame& sf = frames[i];
+      sf.angle = m.capture.fieldAngle(fits[i].angle_deg);
       std::vector<model::GhostParameters> ghosts;
       for (size_t g = 0; g < curves.size(); ++g)
-        if (curves[g].covers(angle)) {
-          present.push_back(static_cast<int>(g));
-          ghosts.push_back(curves[g].at(angle, channels, curves[g].block.data()));
+        if (curves[g].covers(sf.angle)) {
+          sf.present.push_back(static_cast<int>(g));
+          ghosts.push_back(curves[g].at(sf.angle, channels, curves[g].block.data()));
         }
       if (ghosts.empty()) return;
       const Frame f = withoutLight(static_cast<size_t>(fits[i].frame));
-      fitShades(f.image, f.valid, fits[i].noise_sigma, ghosts, &pedestals[i], o.shade);
-      for (size_t j = 0; j < present.size(); ++j) shaded[i].emplace_back(present[j], ghosts[j]);
+      fitShades(f.image, f.valid, fits[i].noise_sigma, ghosts, &pedestals[i], o.shade, &sf.equations);
+      if (sf.equations.normal.empty()) sf.present.clear();
     });
-    const model::ParameterLayout layout{channels};
-    for (size_t g = 0; g < curves.size(); ++g) {
-      std::vector<double> angles;
-      std::vector<model::GhostParameters> values;
-      for (size_t i = 0; i < fits.size(); ++i)
-        for (const auto& [id, ghost] : shaded[i])
-          if (id == static_cast<int>(g)) {
-            angles.push_back(m.capture.fieldAngle(fits[i].angle_deg));
-            values.push_back(ghost);
-          }
-      if (angles.empty()) continue;
-      for (int c = 0; c < channels; ++c)
-        for (int k : {layout.ib(c), layout.ii(c)}) {
-          std::vector<double> v;
-          for (const auto& q : values) v.push_back(model::toParameterVector(q)[k]);
-          const int degree = std::min(degreeByValidation(angles, v, o.min_degree, o.max_degree),
-                                      static_cast<int>(angles.size()) - 1);
-          curves[g].parameters[k] = ScaledPolynomial::from(robustPolynomial(angles, v, degree),
-                                                           curves[g].angle_min, curves[g].angle_max);
-        }
-      curves[g].storeBlock();
-    }
+    solveShadeCurves(curves, frames, channels, o.min_degree, o.max_degree);
+    for (auto& c : curves) c.storeBlock();
     for (size_t i = 0; i < fits.size(); ++i) pedestal_of_frame[fits[i].frame] = pedestals[i];
   }
   sum.seconds_polynomials = since(t_poly);

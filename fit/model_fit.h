@@ -3,8 +3,8 @@
 //
 // First each ghost's parameters become polynomials in the field angle θ − θ0 (the optical zero)
 // by robust least squares over its frame fits, each of the degree that predicts held-out fits
-// best; their shades then solved again for those outlines in every frame (fit/shade.h) and made
-// polynomials. With `refine`, the coefficients themselves are then refined against the frames
+// best; then the shades' polynomials of all ghosts at once, by linear least squares against the
+// frames for those outlines (fit/shade.h ShadeEquations). With `refine`, the coefficients themselves are then refined against the frames
 // directly, in one Ceres problem whose parameter blocks are each ghost's coefficients and whose
 // residuals are the frames' pixels (a stride of frames, each at a level of its pyramid), each
 // frame's in units of its brightest ghost's peak, as PSNR weighs a frame's error. It is off by
@@ -29,7 +29,7 @@ namespace flarekit::fit {
 struct ModelFitOptions {
   int min_degree = 1;                  // polynomial degrees tried by validation (≥ 0)
   int max_degree = 4;                  // (min_degree … kMaxPolynomialDegree)
-  bool reshade = true;                 // the shades again for the polynomials' outlines
+  bool reshade = true;                 // the shades' polynomials against the frames, for the outlines'
   ShadeOptions shade;                  // how (fit/shade.h)
   bool refine = false;                 // refine the coefficients against the frames (docs/fitting.md)
   int refine_frame_stride = 3;         // the refinement uses every n-th frame of the capture (≥ 1)

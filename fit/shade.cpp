@@ -18,7 +18,7 @@ bool ShadeOptions::IsValid(std::string* error) const {
 
 void fitShades(const cv::Mat& image, const cv::Mat& valid, double noise_sigma,
                std::vector<model::GhostParameters>& ghosts, model::Pedestal* pedestal,
-               const ShadeOptions& o) {
+               const ShadeOptions& o, ShadeEquations* equations) {
   std::string error;
   if (!o.IsValid(&error)) throw std::invalid_argument(error);
   const int channels = image.channels(), k = o.level;
@@ -49,6 +49,7 @@ void fitShades(const cv::Mat& image, const cv::Mat& valid, double noise_sigma,
   for (int y = 0; y < size.height; ++y)
     for (int x = 0; x < size.width; ++x)
       if (level_valid.at<uchar>(y, x)) pixels.emplace_back(x, y);
+  if (equations) *equations = {};
   if (pixels.empty()) return;
   Eigen::MatrixXd a(pixels.size(), m);
   for (size_t p = 0; p < pixels.size(); ++p) {
@@ -105,6 +106,22 @@ void fitShades(const cv::Mat& image, const cv::Mat& valid, double noise_sigma,
         const double u = (r(p) - centre) / (o.outlier_sigma * sigma);
         w(p) = std::abs(u) < 1 ? 1 - u * u : 0.0;  // √ of the biweight (1 − u²)²
       }
+    }
+    if (equations) {
+      // Weighted as the last pass left them; the pedestal's terms eliminated (Schur complement).
+      const Eigen::MatrixXd aw = w.asDiagonal() * a;
+      const Eigen::MatrixXd normal = aw.transpose() * aw;
+      const Eigen::VectorXd rhs = aw.transpose() * b.cwiseProduct(w);
+      Eigen::MatrixXd n = normal.topLeftCorner(2 * g, 2 * g);
+      Eigen::VectorXd r = rhs.head(2 * g);
+      if (terms) {
+        const auto pp = normal.bottomRightCorner(terms, terms).completeOrthogonalDecomposition();
+        const Eigen::MatrixXd gp = normal.topRightCorner(2 * g, terms);
+        n -= gp * pp.solve(gp.transpose());
+        r -= gp * pp.solve(rhs.tail(terms));
+      }
+      equations->normal.push_back(std::move(n));
+      equations->rhs.push_back(std::move(r));
     }
     for (int i = 0; i < g; ++i) {
       ghosts[i].border[c] = x(2 * i);

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 
 #include "model/ghost_shape.h"
@@ -25,11 +26,22 @@ struct ShadeOptions {
   bool IsValid(std::string* error) const;
 };
 
+// A frame's shade problem as normal equations in its ghosts' Ib and Ii, per channel, with the
+// robust weights of the frame's own solve and the pedestal's terms eliminated (they stay free in
+// the frame): the model fit sums them over the frames to solve each ghost's shade polynomials
+// at once (fit/model_fit.h), which overlapping ghosts' per-frame values, traded between them
+// from frame to frame, cannot give.
+struct ShadeEquations {
+  std::vector<Eigen::MatrixXd> normal;  // per channel, 2g × 2g: ghost j's Ib at 2j, Ii at 2j + 1
+  std::vector<Eigen::VectorXd> rhs;     // per channel, 2g
+};
+
 // Sets Ib and Ii of every ghost (channel by channel) and `pedestal` (when options.pedestal) to the
 // least-squares values for `image` (the frame, CV_32FC(channels), capture pixels) over its
-// `valid` pixels. `noise_sigma`: the frame's pixel noise σ (the outliers' scale).
+// `valid` pixels. `noise_sigma`: the frame's pixel noise σ (the outliers' scale). `equations`,
+// when given, receives the problem's normal equations (above; empty without valid pixels).
 void fitShades(const cv::Mat& image, const cv::Mat& valid, double noise_sigma,
                std::vector<model::GhostParameters>& ghosts, model::Pedestal* pedestal,
-               const ShadeOptions& options = {});
+               const ShadeOptions& options = {}, ShadeEquations* equations = nullptr);
 
 }  // namespace flarekit::fit
