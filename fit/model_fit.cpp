@@ -275,6 +275,11 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
   constexpr int kChecks = 129;
   constexpr double kHeldAt = 1e-6;  // of the brightest shade
   std::vector<Eigen::VectorXd> held;
+  // A ridge far below any determined direction's weight: what the frames leave undetermined (a
+  // ghost's shade where its pixels are all masked, two candidates drawing the same light) stays
+  // near 0 instead of taking on the noise, amplified.
+  constexpr double kRidge = 1e-9;  // of the mean diagonal
+  n.diagonal().array() += kRidge * n.diagonal().mean();
   Eigen::VectorXd x = n.completeOrthogonalDecomposition().solve(r);
   // Polynomial `q` of ghost g at check i.
   auto value = [&](size_t g, int q, int i) {
