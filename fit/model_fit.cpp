@@ -251,16 +251,18 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
     const auto& sf = frames[f];
     const Eigen::MatrixXd& nf = sf.equations.normal[c];
     const Eigen::VectorXd& rf = sf.equations.rhs[c];
+    std::vector<std::vector<double>> pw;
+    for (int g : sf.present) pw.push_back(powers(curves[g], sf.angle, u.degree[g]));
     for (size_t j = 0; j < sf.present.size(); ++j) {
       const int gj = sf.present[j], dj = u.degree[gj];
-      const auto pj = powers(curves[gj], sf.angle, dj);
+      const auto& pj = pw[j];
       for (int q = 0; q < 2; ++q)
         for (int a = 0; a <= dj; ++a) {
           const int row = u.start[gj] + q * (dj + 1) + a;
           r(row) += pj[a] * rf(2 * j + q);
           for (size_t i = 0; i < sf.present.size(); ++i) {
             const int gi = sf.present[i], di = u.degree[gi];
-            const auto pi = powers(curves[gi], sf.angle, di);
+            const auto& pi = pw[i];
             for (int p = 0; p < 2; ++p)
               for (int b = 0; b <= di; ++b)
                 n(row, u.start[gi] + p * (di + 1) + b) += pj[a] * pi[b] * nf(2 * j + q, 2 * i + p);
