@@ -213,6 +213,8 @@ struct ShadeFrame {
 struct ShadeUnknowns {
   std::vector<int> start, degree;
   int total = 0;
+  // Where ghost g's Ib (q = 0) or Ii (q = 1) coefficients start.
+  int first(int g, int q) const { return start[g] + q * (degree[g] + 1); }
 };
 
 // The unknowns of the joint shade solve over the frames `use` selects, at `degree` (each ghost's
@@ -258,14 +260,14 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
       const auto& pj = pw[j];
       for (int q = 0; q < 2; ++q)
         for (int a = 0; a <= dj; ++a) {
-          const int row = u.start[gj] + q * (dj + 1) + a;
+          const int row = u.first(gj, q) + a;
           r(row) += pj[a] * rf(2 * j + q);
           for (size_t i = 0; i < sf.present.size(); ++i) {
             const int gi = sf.present[i], di = u.degree[gi];
             const auto& pi = pw[i];
             for (int p = 0; p < 2; ++p)
               for (int b = 0; b <= di; ++b)
-                n(row, u.start[gi] + p * (di + 1) + b) += pj[a] * pi[b] * nf(2 * j + q, 2 * i + p);
+                n(row, u.first(gi, p) + b) += pj[a] * pi[b] * nf(2 * j + q, 2 * i + p);
           }
         }
     }
@@ -285,10 +287,9 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
   Eigen::VectorXd x = n.completeOrthogonalDecomposition().solve(r);
   // Polynomial `q` of ghost g at check i.
   auto value = [&](size_t g, int q, int i) {
-    const int d = u.degree[g], first = u.start[g] + q * (d + 1);
     const double v = -1 + 2.0 * i / (kChecks - 1);
     double sum = 0;
-    for (int a = d; a >= 0; --a) sum = sum * v + x(first + a);
+    for (int a = u.degree[g]; a >= 0; --a) sum = sum * v + x(u.first(g, q) + a);
     return sum;
   };
   double brightest = 0;
@@ -307,7 +308,7 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
         if (lowest >= 0) continue;
         Eigen::VectorXd row = Eigen::VectorXd::Zero(u.total);
         for (int a = 0; a <= d; ++a)
-          row(u.start[g] + q * (d + 1) + a) = std::pow(-1 + 2.0 * at / (kChecks - 1), a);
+          row(u.first(g, q) + a) = std::pow(-1 + 2.0 * at / (kChecks - 1), a);
         held.push_back(row);
         dipped = true;
       }
@@ -335,7 +336,7 @@ Eigen::VectorXd shadesAt(const std::vector<GhostCurves>& curves, const ShadeFram
     const int g = sf.present[j], d = u.degree[g];
     const auto p = powers(curves[g], sf.angle, d);
     for (int q = 0; q < 2; ++q)
-      for (int a = 0; a <= d; ++a) v(2 * j + q) += p[a] * x(u.start[g] + q * (d + 1) + a);
+      for (int a = 0; a <= d; ++a) v(2 * j + q) += p[a] * x(u.first(g, q) + a);
   }
   return v;
 }
@@ -379,11 +380,9 @@ void solveShadeCurves(std::vector<GhostCurves>& curves, const std::vector<ShadeF
       if (d < 0) continue;
       for (int q = 0; q < 2; ++q) {
         auto& p = curves[g].parameters[q == 0 ? layout.ib(c) : layout.ii(c)];
-        const double centre = curves[g].parameters[model::param::kMx].centre;
-        const double scale = curves[g].parameters[model::param::kMx].scale;
-        p.centre = centre;
-        p.scale = scale;
-        p.coefficients.assign(x.data() + u.start[g] + q * (d + 1), x.data() + u.start[g] + (q + 1) * (d + 1));
+        p.centre = curves[g].parameters[model::param::kMx].centre;
+        p.scale = curves[g].parameters[model::param::kMx].scale;
+        p.coefficients.assign(x.data() + u.first(g, q), x.data() + u.first(g, q) + d + 1);
       }
     }
   }
