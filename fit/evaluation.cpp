@@ -237,6 +237,7 @@ FrameEvaluation evaluateFrame(const Frame& f, const FlareAtAngle& flare, int cha
     // Whose light it draws (FrameEvaluation::Unmatched).
     FrameEvaluation::Unmatched u;
     u.model_id = model_blobs[k].id;
+    u.peak_sigma = fe.noise_sigma > 0 ? model_blobs[k].peak / fe.noise_sigma : kNaN;
     cv::Mat drawn = cv::max(model_images[k], 0.0f);
     const double total = cv::sum(drawn)[0];
     cv::Mat shared;
@@ -473,6 +474,7 @@ nlohmann::json unmatched(const FrameEvaluation& f) {
                  {"fraction_in_true", u.fraction_in_true},
                  {"piece", u.piece()},
                  {"fraction_on_light", u.fraction_on_light},
+                 {"peak_sigma", u.peak_sigma},
                  {"centroid_on_light", u.centroid_on_light},
                  {"on_light", u.onLight()}});
   return a;

@@ -125,6 +125,7 @@ struct FrameEvaluation {
     int true_id = -1;                 // the true ghost holding most of its light (−1: none)
     double fraction_in_true = 0;      // that part, 0–1
     double fraction_on_light = 0;     // the part of its light on the light's region, 0–1
+    double peak_sigma = 0;            // its peak in noise σ (as Missed::peak_sigma)
     bool centroid_on_light = false;   // its centroid's pixel is in that region
     bool piece() const { return fraction_in_true >= kPieceFraction; }
     bool onLight() const { return centroid_on_light || fraction_on_light > kLightFraction; }

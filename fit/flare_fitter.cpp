@@ -70,7 +70,8 @@ nlohmann::json FitSummary::toJson() const {
                     {"ghost_fits", frame_fit.ghost_fits},
                     {"evaluations", frame_fit.evaluations},
                     {"iterations", frame_fit.iterations}};
-  j["model_fit"] = {{"refine_frames", model_fit.refine_frames},
+  j["model_fit"] = {{"ghosts_unseen", model_fit.ghosts_unseen},
+                    {"refine_frames", model_fit.refine_frames},
                     {"refine_iterations", model_fit.refine_iterations},
                     {"refine_initial_cost", model_fit.refine_initial_cost},
                     {"refine_final_cost", model_fit.refine_final_cost},

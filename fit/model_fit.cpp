@@ -437,6 +437,7 @@ bool ModelFitOptions::IsValid(std::string* error) const {
   if (refine_frame_stride < 1) return fail("model fit: refine_frame_stride must be ≥ 1");
   if (refine_pixels < 1000) return fail("model fit: refine_pixels must be ≥ 1000");
   if (refine_iterations < 1) return fail("model fit: refine_iterations must be ≥ 1");
+  if (!(min_peak_sigma >= 0)) return fail("model fit: min_peak_sigma must be ≥ 0");
   if (pedestal_degree < 0 || pedestal_degree > model::kMaxPolynomialDegree)
     return fail("model fit: pedestal_degree must be 0–10");
   if (pedestal_level < 1) return fail("model fit: pedestal_level must be ≥ 1");
@@ -614,6 +615,34 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   }
   sum.seconds_refine = since(t_refine);
 
+  // 3. Each ghost's range ends where it draws nothing the frames can show: its brightest value
+  // (Ib or Ii, in any channel) below min_peak_sigma × the frame's noise σ. The shades decide
+  // where a ghost is, not the candidates' traces alone: a trace's ghost whose light the others
+  // already draw gets shades of about 0 and is no ghost there.
+  std::vector<GhostCurves> seen;
+  for (auto& c : curves) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (const auto& f : fits) {
+      const double angle = m.capture.fieldAngle(f.angle_deg);
+      if (!c.covers(angle)) continue;
+      const model::GhostParameters q = c.at(angle, channels, c.block.data());
+      double peak = 0;
+      for (int ch = 0; ch < channels; ++ch) peak = std::max({peak, q.border[ch], q.inside[ch]});
+      if (peak >= o.min_peak_sigma * f.noise_sigma) {
+        lo = std::min(lo, angle);
+        hi = std::max(hi, angle);
+      }
+    }
+    if (lo > hi) {
+      ++sum.ghosts_unseen;
+      continue;
+    }
+    c.angle_min = std::max(c.angle_min, lo - half_step);
+    c.angle_max = std::min(c.angle_max, hi + half_step);
+    seen.push_back(std::move(c));
+  }
+  curves = std::move(seen);
+
   for (const auto& c : curves) {
     model::GhostTrack t;
     t.id = c.id;
@@ -625,7 +654,7 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   }
   sum.ghosts = static_cast<int>(m.ghosts.size());
 
-  // 3. The pedestal: what the model's ghosts leave of each frame, as polynomials.
+  // 4. The pedestal: what the model's ghosts leave of each frame, as polynomials.
   const auto t_pedestal = Clock::now();
   if (o.pedestal) {
     const int k = o.pedestal_level;

@@ -37,6 +37,8 @@ struct ModelFitOptions {
   int refine_pixels = 30000;           // each such frame at the first level within this many pixels
   int refine_iterations = 10;          // Levenberg–Marquardt iterations of the refinement (≥ 1)
   CostOptions cost;                    // the refinement's cost (its shape prior is not used)
+  double min_peak_sigma = 1;           // a ghost's range ends where its brightest value falls below
+                                       // this × the frame's noise σ (≥ 0; 0 keeps the candidates')
   bool pedestal = true;                // fit the model's pedestal
   int pedestal_degree = 8;             // its polynomials' degree (the glow changes over the capture)
   int pedestal_level = 2;              // fitted on k×k averages of each frame (≥ 1)
@@ -47,6 +49,7 @@ struct ModelFitOptions {
 
 struct ModelFitSummary {
   int ghosts = 0;
+  int ghosts_unseen = 0;               // candidates whose shades are below min_peak_sigma throughout
   int refine_frames = 0;               // frames the refinement used
   int refine_iterations = 0;
   double refine_initial_cost = 0, refine_final_cost = 0;

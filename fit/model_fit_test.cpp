@@ -63,20 +63,23 @@ double psnr(const cv::Mat& truth, const cv::Mat& image) {
   return 10 * std::log10(peak * peak / mse);
 }
 
-TEST(ModelFit, DrawsNestedGhostsWhoseFramesTradedTheirShades) {
-  const NestedScene scene;
-  const FrameStack stack = scene.stack();
-  const int n = static_cast<int>(stack.frames.size());
-  Horizon horizon;
-  horizon.y_px = 60.3;
-  horizon.lights.resize(n);  // no light in these frames
-  std::vector<GhostCandidate> candidates(2);
-  for (int g = 0; g < 2; ++g) {
-    candidates[g].id = g;
-    candidates[g].first_row = 0;
-    candidates[g].last_row = n - 1;
-  }
+// The scene's two ghosts as candidates over every frame and their frame fits at every other frame,
+// shades traded between the two; `phantom` adds a third candidate where the frames have no light
+// (a border trace of no ghost), fitted there with the inner ghost's shades.
+struct SceneFits {
+  std::vector<GhostCandidate> candidates;
   std::vector<FrameFit> fits;
+};
+SceneFits sceneFits(const NestedScene& scene, const FrameStack& stack, bool phantom) {
+  const int n = static_cast<int>(stack.frames.size());
+  SceneFits out;
+  const int ghosts = phantom ? 3 : 2;
+  out.candidates.resize(ghosts);
+  for (int g = 0; g < ghosts; ++g) {
+    out.candidates[g].id = g;
+    out.candidates[g].first_row = 0;
+    out.candidates[g].last_row = n - 1;
+  }
   for (int i = 0; i < n; i += 2) {
     FrameFit f;
     f.frame = i;
@@ -88,14 +91,35 @@ TEST(ModelFit, DrawsNestedGhostsWhoseFramesTradedTheirShades) {
     outer.inside[0] = std::max(0.0, outer.inside[0] + traded);
     inner.inside[0] = std::max(0.0, inner.inside[0] - traded);
     f.ghosts = {outer, inner};
-    fits.push_back(f);
+    if (phantom) {
+      model::GhostParameters none = inner;
+      none.center_x = 165;
+      none.left = none.right = 12;
+      none.height = 10;
+      f.ghost_ids.push_back(2);
+      f.ghosts.push_back(none);
+    }
+    out.fits.push_back(f);
   }
+  return out;
+}
+
+model::FlareModel fitScene(const NestedScene& scene, const FrameStack& stack, bool phantom) {
+  Horizon horizon;
+  horizon.y_px = 60.3;
+  horizon.lights.resize(stack.frames.size());  // no light in these frames
+  const SceneFits s = sceneFits(scene, stack, phantom);
   OpticalZero zero;
   zero.axis_x_px = 100;
   ModelFitOptions options;
   options.pedestal = false;
-  const model::FlareModel m = fitModel(stack, horizon, LightPattern{}, candidates, fits, zero, options);
+  return fitModel(stack, horizon, LightPattern{}, s.candidates, s.fits, zero, options);
+}
 
+TEST(ModelFit, DrawsNestedGhostsWhoseFramesTradedTheirShades) {
+  const NestedScene scene;
+  const FrameStack stack = scene.stack();
+  const model::FlareModel m = fitScene(scene, stack, false);
   std::string error;
   EXPECT_TRUE(m.IsValid(&error)) << error;  // the faded ghost's shade stays ≥ 0 over its range
   ASSERT_EQ(m.ghosts.size(), 2u);
@@ -110,6 +134,16 @@ TEST(ModelFit, DrawsNestedGhostsWhoseFramesTradedTheirShades) {
   }
   std::nth_element(scores.begin(), scores.begin() + scores.size() / 2, scores.end());
   EXPECT_GT(scores[scores.size() / 2], 40);
+}
+
+// A ghost is in the model where it draws light: a candidate the frames show no light for is none.
+TEST(ModelFit, ACandidateWithoutLightIsNoGhost) {
+  const NestedScene scene;
+  const FrameStack stack = scene.stack();
+  const model::FlareModel m = fitScene(scene, stack, true);
+  ASSERT_EQ(m.ghosts.size(), 2u);
+  EXPECT_EQ(m.ghosts[0].id, 0);
+  EXPECT_EQ(m.ghosts[1].id, 1);
 }
 
 }  // namespace
