@@ -386,7 +386,10 @@ void Session::captureFrame(int index, double angle_deg) {
       const std::string file =
           "raw/" + name + "_e" + std::to_string(k) + (dng ? ".dng" : ".png");
       if (dng) {
-        writeDng(out_ / file, bracket[k], bracket[k].camera);
+        DngMetadata dng;
+        dng.model = bracket[k].camera;
+        dng.focal_length_mm = focal_length_mm_;
+        writeDng(out_ / file, bracket[k], dng);
       } else {
         writeFileAtomically(out_ / file, [&](const fs::path& tmp) {
           if (!cv::imwrite(tmp.string(), bracket[k].data))

@@ -49,6 +49,8 @@ struct RawFrame {
   double exposure_s = 0;      // the exposure actually used (from EXIF for real cameras)
   double iso = 0;             // 0 when unknown
   double f_number = 0;        // 0 when unknown
+  double focal_length_mm = 0; // lens focal length from EXIF; 0 when unknown
+  int64_t capture_time = 0;   // when the frame was taken, Unix seconds; 0 when unknown
   std::string camera;         // camera model, for metadata
 };
 

@@ -4,12 +4,39 @@
 
 #include <cmath>
 #include <cstdint>
+#include <ctime>
 
 #include "common/atomic_file.h"
 
 namespace flarekit::acquisition {
 
+namespace {
+
+// "YYYY:MM:DD HH:MM:SS" in local time, the TIFF/EXIF date format.
+std::string exifDateTime(int64_t unix_s) {
+  const std::time_t t = static_cast<std::time_t>(unix_s);
+  std::tm local{};
+  localtime_r(&t, &local);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y:%m:%d %H:%M:%S", &local);
+  return text;
+}
+
+}  // namespace
+
 void writeDng(const std::filesystem::path& path, const RawFrame& frame, const std::string& model) {
+  DngMetadata meta;
+  meta.model = model;
+  writeDng(path, frame, meta);
+}
+
+void writeDng(const std::filesystem::path& path, const RawFrame& frame, const DngMetadata& meta) {
+  const std::string& model = meta.model;
+  const int64_t taken = meta.capture_time   ? meta.capture_time
+                        : frame.capture_time ? frame.capture_time
+                                             : static_cast<int64_t>(std::time(nullptr));
+  const std::string date = exifDateTime(taken);
+  const double focal_mm = meta.focal_length_mm > 0 ? meta.focal_length_mm : frame.focal_length_mm;
   if (frame.cfa == Cfa::kMono)
     throw InputError(path.string(), "monochrome frames are not written as DNG (use PNG)");
   if (frame.data.type() != CV_16UC1 || frame.data.empty())
@@ -30,6 +57,7 @@ void writeDng(const std::filesystem::path& path, const RawFrame& frame, const st
     TIFFSetField(tif, TIFFTAG_MODEL, model.c_str());
     TIFFSetField(tif, TIFFTAG_DNGVERSION, dng_version);
     TIFFSetField(tif, TIFFTAG_UNIQUECAMERAMODEL, model.c_str());
+    TIFFSetField(tif, TIFFTAG_DATETIME, date.c_str());
     const uint16_t dim[2] = {2, 2};
     // CFAPattern colours: 0 red, 1 green, 2 blue, for the 2×2 block read row by row.
     uint8_t pattern[4];
@@ -57,6 +85,8 @@ void writeDng(const std::filesystem::path& path, const RawFrame& frame, const st
       if (frame.f_number > 0) TIFFSetField(tif, EXIFTAG_FNUMBER, frame.f_number);
       const uint16_t iso[1] = {static_cast<uint16_t>(std::lround(std::max(frame.iso, 0.0)))};
       if (frame.iso > 0) TIFFSetField(tif, EXIFTAG_ISOSPEEDRATINGS, 1, iso);
+      if (focal_mm > 0) TIFFSetField(tif, EXIFTAG_FOCALLENGTH, focal_mm);
+      TIFFSetField(tif, EXIFTAG_DATETIMEORIGINAL, date.c_str());
       ok = TIFFWriteCustomDirectory(tif, &exif_offset) != 0;
     }
     ok = ok && TIFFSetDirectory(tif, 0) && TIFFSetField(tif, TIFFTAG_EXIFIFD, exif_offset) &&

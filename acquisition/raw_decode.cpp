@@ -84,6 +84,8 @@ RawFrame decodeRawBuffer(const void* data, size_t size, const std::string& name)
   f.exposure_s = raw->imgdata.other.shutter;
   f.iso = raw->imgdata.other.iso_speed;
   f.f_number = raw->imgdata.other.aperture;
+  f.focal_length_mm = raw->imgdata.other.focal_len;
+  f.capture_time = static_cast<int64_t>(raw->imgdata.other.timestamp);
   f.camera = std::string(raw->imgdata.idata.make) + " " + raw->imgdata.idata.model;
   return f;
 }

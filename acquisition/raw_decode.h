@@ -13,8 +13,8 @@ namespace flarekit::acquisition {
 // Decodes a camera RAW file (CR2, CR3, NEF, ARW, DNG, ...) held in memory, as gphoto2 delivers
 // it. Returns the visible area's photosites (no scaling, no demosaicing), the Bayer layout, the
 // black level (per-channel black offsets folded into the data so that one level applies), the
-// white level (LibRaw's maximum with adjust_maximum_thr = 0) and the EXIF exposure time, ISO and
-// f-number. `name` is used in messages. InputError when LibRaw cannot read it or when it is not a
+// white level (LibRaw's maximum with adjust_maximum_thr = 0) and the EXIF exposure time, ISO,
+// f-number, focal length and capture time. `name` is used in messages. InputError when LibRaw cannot read it or when it is not a
 // single-channel mosaic (e.g. an already demosaiced linear DNG).
 RawFrame decodeRawBuffer(const void* data, size_t size, const std::string& name);
 RawFrame decodeRawFile(const std::filesystem::path& path);

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <ctime>
 #include <fstream>
 #include <iterator>
 
@@ -49,6 +50,32 @@ TEST(RawDecode, ReadsBayerDngWithLevelsAndExif) {
   EXPECT_EQ(decodeRawFile(dir / "b.dng").cfa, Cfa::kGBRG);
   spec.cfa = Cfa::kMono;
   EXPECT_THROW(writeDng(dir / "m.dng", spec), InputError);
+}
+
+// The capture time and focal length travel in the DNG's EXIF (LibRaw read 1970 and 0 mm before).
+TEST(RawDecode, ReadsCaptureTimeAndFocalLengthOfADng) {
+  testing::TempDir dir;
+  RawFrame spec;
+  spec.data = pattern(48, 64);
+  spec.cfa = Cfa::kRGGB;
+  spec.black_level = 256;
+  spec.white_level = 16383;
+  spec.exposure_s = 1;
+  DngMetadata meta;
+  meta.capture_time = 1780000000;  // 2026-05-28
+  meta.focal_length_mm = 100;
+  writeDng(dir / "a.dng", spec, meta);
+  RawFrame f = decodeRawFile(dir / "a.dng");
+  EXPECT_EQ(f.capture_time, 1780000000);
+  EXPECT_NEAR(f.focal_length_mm, 100, 1e-6);
+  // Without either, the frame's own values; the time defaults to now.
+  spec.focal_length_mm = 35;
+  const int64_t before = static_cast<int64_t>(std::time(nullptr));
+  writeDng(dir / "b.dng", spec);
+  RawFrame g = decodeRawFile(dir / "b.dng");
+  EXPECT_NEAR(g.focal_length_mm, 35, 1e-6);
+  EXPECT_GE(g.capture_time, before);
+  EXPECT_LE(g.capture_time, static_cast<int64_t>(std::time(nullptr)));
 }
 
 TEST(RawDecode, NotARawFileIsAnInputErrorNamingTheFile) {
