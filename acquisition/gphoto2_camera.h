@@ -2,14 +2,23 @@
 // A tethered camera through libgphoto2 (2.5.30), decoded with LibRaw (acquisition/raw_decode.h).
 //
 // Setup: camera in M mode, manual focus, stabilisation and long-exposure noise reduction off.
-// The driver sets `imageformat` to RAW only, brackets by setting `shutterspeed` before each frame
-// (the nearest value the camera offers; the real exposure is read back from EXIF and kept with
-// the frame), sets `iso` and `aperture`, captures, downloads the file into memory, deletes it
-// from the camera and decodes it. Debian's libgphoto2 has no virtual camera for capture, so this
-// backend is kept thin and its tests need a real camera (CTest label "hardware").
+// The camera is found by USB autodetection, or at a PTP/IP port given in the rig file
+// ("ptpip:IPV4[:PORT]"; autodetection does not list network cameras). The driver sets the image
+// format to RAW only (`imageformat`, or `imagequality` where the driver names it so), brackets by
+// setting `shutterspeed` before each frame (the nearest value the camera offers; the real
+// exposure is read back from EXIF and kept with the frame), sets `iso` and the aperture
+// (`aperture`, or `f-number` on generic PTP and Sony cameras), triggers the capture, waits for
+// the camera to report the new file, downloads it into memory, checks its size against what the
+// camera announced, deletes it from the camera and decodes it. Its tests run against a PTP/IP
+// camera served by the tests (acquisition/testing/ptpip_camera.h); a real camera runs under
+// the "hardware" CTest label.
 //
-// Failures: DeviceError — transient for a busy camera or a failed transfer (GP_ERROR_CAMERA_BUSY,
-// GP_ERROR_IO*, timeouts), persistent for a missing camera or an unsupported setting.
+// Watchdog: every libgphoto2 socket and USB operation has its own timeout; the wait for the new
+// file gives up after the exposure plus Gphoto2Config::capture_timeout_s. A failed or timed-out
+// capture, trigger, download, truncated file or refused setting throws a transient DeviceError:
+// the capture session reconnects (reconnect()) and retries, and stops with the session saved
+// after its retries run out. Persistent: no camera, a setting the camera does not have, a file
+// that is not RAW. A model or port libgphoto2 does not know is an InputError (the rig file).
 
 #include <memory>
 #include <string>
@@ -45,7 +54,8 @@ double parseShutterSpeed(const std::string& text);
 // The choice closest to `exposure_s` in log space; empty when there are none.
 std::string nearestShutterSpeed(const std::vector<std::string>& choices, double exposure_s);
 
-// rig-check: lists the cameras gphoto2 detects; false when the configured one is missing.
+// rig-check: lists the cameras gphoto2 detects, or opens the PTP/IP port the rig names; false
+// when the configured camera is missing.
 bool probeGphoto2(const Gphoto2Config& config, std::vector<std::string>* lines);
 
 }  // namespace flarekit::acquisition

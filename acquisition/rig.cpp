@@ -1,5 +1,7 @@
 #include "acquisition/rig.h"
 
+#include <arpa/inet.h>
+
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
@@ -136,6 +138,23 @@ void parseHead(const ConfigNode& h, Rig& rig) {
   }
 }
 
+// "ptpip:192.168.1.1" or "ptpip:192.168.1.1:15740": what libgphoto2's PTP/IP port connects to.
+bool validPtpIpPort(const std::string& port) {
+  std::string rest = port.substr(6);
+  const auto colon = rest.find(':');
+  if (colon != std::string::npos) {
+    const std::string number = rest.substr(colon + 1);
+    rest = rest.substr(0, colon);
+    if (number.empty() || number.size() > 5 ||
+        number.find_first_not_of("0123456789") != std::string::npos)
+      return false;
+    const int p = std::atoi(number.c_str());
+    if (p < 1 || p > 65535) return false;
+  }
+  in_addr address{};
+  return inet_pton(AF_INET, rest.c_str(), &address) == 1;
+}
+
 void parseCamera(const ConfigNode& c, Rig& rig) {
   std::string driver = c["driver"].string();
   if (driver == "simulated") {
@@ -143,10 +162,15 @@ void parseCamera(const ConfigNode& c, Rig& rig) {
     c.checkKnownKeys({"driver"});
   } else if (driver == "gphoto2") {
     rig.camera_driver = CameraDriver::kGphoto2;
-    c.checkKnownKeys({"driver", "model", "port", "imageformat"});
+    c.checkKnownKeys({"driver", "model", "port", "imageformat", "capture_timeout_s"});
     rig.gphoto2.model = c.string("model", "");
     rig.gphoto2.port = c.string("port", "");
+    if (rig.gphoto2.port.rfind("ptpip:", 0) == 0 && !validPtpIpPort(rig.gphoto2.port))
+      c["port"].fail("must be \"ptpip:IPV4\" or \"ptpip:IPV4:PORT\" (libgphoto2 takes a numeric "
+                     "IPv4 address, port 1..65535; default 15740), got \"" + rig.gphoto2.port + "\"");
     rig.gphoto2.imageformat = c.string("imageformat", "RAW");
+    rig.gphoto2.capture_timeout_s =
+        positive(c, "capture_timeout_s", rig.gphoto2.capture_timeout_s);
   } else {
     c["driver"].fail("must be \"simulated\" or \"gphoto2\", got \"" + driver + "\"");
   }

@@ -67,9 +67,18 @@ struct SimulatedHeadConfig {
 };
 
 struct Gphoto2Config {
-  std::string model;  // camera model as gphoto2 --auto-detect lists it ("" = the first camera)
-  std::string port;   // port ("usb:001,004"; "" = the first)
-  std::string imageformat = "RAW";  // the imageformat widget value that means RAW only
+  // Camera model as gphoto2 --auto-detect lists it ("" = the first camera; for a PTP/IP port
+  // "" = libgphoto2's generic "PTP/IP Camera").
+  std::string model;
+  // Port: "usb:001,004", or "ptpip:IPV4[:PORT]" for a camera on the network (PTP/IP, port
+  // 15740 by default), which autodetection cannot find; "" = the first camera detected.
+  std::string port;
+  // The value of the camera's `imageformat` (or, where the driver has none, `imagequality`)
+  // setting that means RAW only; "" = leave the camera's setting alone (default "RAW").
+  std::string imageformat = "RAW";
+  // Watchdog: the longest a capture may take beyond its exposure time before the camera is
+  // reconnected and the capture retried, seconds (default 30).
+  double capture_timeout_s = 30;
 };
 
 // The sensor's noise model (render/sensor.h conventions) and geometry.

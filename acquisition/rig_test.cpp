@@ -100,6 +100,23 @@ TEST(Rig, ErrorsNameFileKeyAndProblem) {
   EXPECT_EQ(e.find('\n'), std::string::npos);
 }
 
+// A camera on the network is named by its PTP/IP address, which libgphoto2 takes numeric.
+TEST(Rig, PtpIpCameraPortsAreChecked) {
+  auto withPort = [](const std::string& port) {
+    return kGpioRig + "port = \"" + port + "\"\ncapture_timeout_s = 10\n";
+  };
+  EXPECT_EQ(errorOf(withPort("ptpip:192.168.1.20")), "");
+  EXPECT_EQ(errorOf(withPort("ptpip:127.0.0.1:15740")), "");
+  EXPECT_EQ(errorOf(withPort("usb:001,004")), "");
+  for (const std::string bad : {"ptpip:camera.local", "ptpip:10.0.0.1:0", "ptpip:10.0.0.1:x"}) {
+    const std::string e = errorOf(withPort(bad));
+    EXPECT_NE(e.find("bad.toml: camera.port: must be \"ptpip:IPV4\" or \"ptpip:IPV4:PORT\""),
+              std::string::npos) << e;
+  }
+  EXPECT_NE(errorOf(kGpioRig + "capture_timeout_s = 0\n").find("camera.capture_timeout_s"),
+            std::string::npos);
+}
+
 // A simulated rig, small and quick: 160×107 pixels, the Heliar's three brightest ghosts.
 std::string simulatedRig(const std::string& simulation_keys) {
   const std::string lens =
