@@ -296,6 +296,7 @@ struct Gphoto2Camera::Impl {
   Connection link;
   std::string device_model;  // the camera's own model name, for frames and logs
   double exposure_s = 0;     // the shutter speed last set, seconds
+  bool warned_no_image_format = false;
 
   void open() {
     link.open(config);
@@ -340,8 +341,10 @@ struct Gphoto2Camera::Impl {
     std::string name;
     WidgetPtr w = findWidget({"imageformat", "imagequality"}, &name);
     if (!w) {
-      logWarning("camera " + link.name() + " has no image format setting: set it to save RAW only "
-                 "yourself (frames that are not RAW stop the capture)");
+      if (!warned_no_image_format)  // once, not at every reconnect
+        logWarning("camera " + link.name() + " has no image format setting: set it to save RAW "
+                   "only yourself (frames that are not RAW stop the capture)");
+      warned_no_image_format = true;
       return;
     }
     const auto choices = widgetChoices(w.get());

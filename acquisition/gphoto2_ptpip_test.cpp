@@ -236,6 +236,8 @@ struct FaultCase {
   int PtpIpFaults::*fault;
 };
 
+void PrintTo(const FaultCase& c, std::ostream* os) { *os << c.name; }
+
 class Gphoto2PtpIpFault : public ::testing::TestWithParam<FaultCase> {
  protected:
   // A clean capture, for comparison.

@@ -35,5 +35,12 @@ function(flarekit_tests name)
   endif()
   gtest_discover_tests(${name}
     DISCOVERY_TIMEOUT 120
-    PROPERTIES LABELS "${labels}" ENVIRONMENT "ASAN_OPTIONS=detect_leaks=1:verify_asan_link_order=0")
+    TEST_LIST ${name}_TESTS
+    PROPERTIES ENVIRONMENT "ASAN_OPTIONS=detect_leaks=1:verify_asan_link_order=0")
+  # Labels are set once the tests are discovered: CMake 3.25 splits a list given in PROPERTIES,
+  # so only the first of several labels would stick.
+  set(label_file ${CMAKE_CURRENT_BINARY_DIR}/${name}_labels.cmake)
+  file(WRITE ${label_file}
+    "if(${name}_TESTS)\n  set_tests_properties(\${${name}_TESTS} PROPERTIES LABELS \"${labels}\")\nendif()\n")
+  set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES ${label_file})
 endfunction()
