@@ -397,7 +397,8 @@ struct Gphoto2Camera::Impl {
     for (int i = 0; i < 100; ++i) {
       CameraEventType type = GP_EVENT_TIMEOUT;
       void* data = nullptr;
-      const int rc = gp_camera_wait_for_event(link.camera.get(), 0, &type, &data, link.ctx.get());
+      // 10 ms, not 0: a USB port takes a timeout of 0 as "wait for ever".
+      const int rc = gp_camera_wait_for_event(link.camera.get(), 10, &type, &data, link.ctx.get());
       std::free(data);
       if (rc < GP_OK) link.fail(rc, "reading the camera's events", true);
       if (type == GP_EVENT_TIMEOUT) return;
@@ -444,11 +445,12 @@ struct Gphoto2Camera::Impl {
 
   RawFrame download(const CameraFilePath& path) {
     const std::string file = std::string(path.folder) + "/" + path.name;
+    // The size the camera announced (PTP ObjectInfo), to check the download against; drivers
+    // that cannot say (virtual files of some vendors) skip the check.
     CameraFileInfo info{};
-    link.clearErrors();
-    link.check(gp_camera_file_get_info(link.camera.get(), path.folder, path.name, &info,
-                                       link.ctx.get()),
-               "reading the information of " + file);
+    if (gp_camera_file_get_info(link.camera.get(), path.folder, path.name, &info,
+                                link.ctx.get()) < GP_OK)
+      info.file.fields = GP_FILE_INFO_NONE;
     CameraFile* raw_file = nullptr;
     link.check(gp_file_new(&raw_file), "allocating a file");
     FilePtr owner(raw_file);

@@ -74,12 +74,14 @@ Rig spotRig(const ServedCamera& served) {
   return rig;
 }
 
+// Three angles, two short exposures the camera offers (1/100 s and 1/25 s): the watchdog's wait
+// for a capture that never completes is the exposure plus capture_timeout_s.
 CapturePlan spotPlan() {
   CapturePlan p;
   p.from_deg = 0;
   p.to_deg = 2;
   p.step_deg = 1;
-  p.exposures_s = {0.25, 1};
+  p.exposures_s = {0.01, 0.04};
   p.retry_delay_s = 0;
   return p;
 }
