@@ -216,11 +216,16 @@ struct Connection {
     const int rc = gp_camera_init(cam, ctx.get());
     if (rc < GP_OK) {
       camera.reset();
+      // PTP/IP: an I/O error is a refused or timed-out connection; other errors mean that what
+      // answered did not complete the PTP/IP handshake and session.
+      const bool nothing_there = rc == GP_ERROR_IO || rc == GP_ERROR_TIMEOUT;
       fail(rc, "connecting", true,
-           isNetworkPort(port)
+           !isNetworkPort(port) ? "check the cable and that the camera is on and awake"
+           : nothing_there
                ? "nothing answers there as a PTP/IP camera: check that the camera is on, in its "
                  "PC-connection (Wi-Fi/LAN remote) mode and at that address, and camera.port"
-               : "check the cable and that the camera is on and awake");
+               : "what answers there is not a PTP/IP camera (another service on that port?): "
+                 "check camera.port");
     }
   }
 

@@ -384,6 +384,7 @@ TEST(Gphoto2PtpIp, ACameraAnsweringGarbageIsOneLineNamingTheCamera) {
   } catch (const DeviceError& e) {
     const std::string m = e.what();
     EXPECT_EQ(m.rfind("camera PTP/IP Camera on " + config.port + ": connecting failed", 0), 0u) << m;
+    EXPECT_NE(m.find("what answers there is not a PTP/IP camera"), std::string::npos) << m;
     EXPECT_EQ(m.find('\n'), std::string::npos) << m;
   }
 }
