@@ -371,6 +371,28 @@ TEST(Gphoto2PtpIp, AnUnreachablePortIsOneLineNamingTheCamera) {
   EXPECT_EQ(lines[0].rfind("MISSING: camera PTP/IP Camera on " + config.port, 0), 0u) << lines[0];
 }
 
+// A model libgphoto2 does not know is the rig file's error (exit 2), found before connecting.
+TEST(Gphoto2PtpIp, AnUnknownModelIsTheRigFilesError) {
+  Rig rig = testing::spotRig("ptpip-unknown");
+  rig.camera_driver = CameraDriver::kGphoto2;
+  rig.gphoto2.model = "Flarekit Imaginary Mark II";
+  rig.gphoto2.port = "ptpip:127.0.0.1:" + std::to_string(closedPort());
+  const std::string expected = "ptpip-unknown.toml: camera.model: libgphoto2 has no camera named "
+                               "\"Flarekit Imaginary Mark II\"";
+  try {
+    openRig(rig);
+    FAIL() << "opened an unknown model";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(expected, 0), 0u) << e.what();
+  }
+  try {
+    checkRig(rig);
+    FAIL() << "checked an unknown model";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(expected, 0), 0u) << e.what();
+  }
+}
+
 TEST(Gphoto2PtpIp, ACameraAnsweringGarbageIsOneLineNamingTheCamera) {
   auto served = spotCamera();
   PtpIpFaults f;

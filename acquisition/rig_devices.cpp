@@ -41,7 +41,11 @@ RigDevices openRig(const Rig& rig) {
       break;
     }
     case CameraDriver::kGphoto2:
-      devices.camera = std::make_unique<Gphoto2Camera>(rig.gphoto2);
+      try {
+        devices.camera = std::make_unique<Gphoto2Camera>(rig.gphoto2);
+      } catch (const InputError& e) {
+        throw InputError(rig.file.string(), e.what());  // a camera.model or camera.port
+      }
       break;
   }
   return devices;
@@ -89,7 +93,11 @@ RigCheckReport checkRig(const Rig& rig) {
       break;
     }
     case CameraDriver::kGphoto2:
-      guard("camera", [&] { return probeGphoto2(rig.gphoto2, &lines); });
+      try {
+        guard("camera", [&] { return probeGphoto2(rig.gphoto2, &lines); });
+      } catch (const InputError& e) {
+        throw InputError(rig.file.string(), e.what());  // a camera.model or camera.port
+      }
       break;
   }
   lines.push_back(report.ok ? "rig-check: everything the rig names was found"
