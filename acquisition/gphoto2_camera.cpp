@@ -13,6 +13,7 @@
 #include <map>
 #include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "acquisition/raw_decode.h"
 #include "common/log.h"
@@ -414,13 +415,21 @@ struct Gphoto2Camera::Impl {
   // plus config.capture_timeout_s (libgphoto2's gp_camera_capture would wait for ever on a
   // PTP camera that never reports the new object).
   CameraFilePath triggerAndWait() {
+    using Clock = std::chrono::steady_clock;
     drainEvents();
-    link.clearErrors();
-    const int rc = gp_camera_trigger_capture(link.camera.get(), link.ctx.get());
+    // A camera still saving the last frame answers DeviceBusy: asked again every 0.1 s for up to
+    // capture_timeout_s before the session's retry (which reconnects) takes over.
+    const auto busy_until = Clock::now() + std::chrono::duration<double>(config.capture_timeout_s);
+    int rc;
+    for (;;) {
+      link.clearErrors();
+      rc = gp_camera_trigger_capture(link.camera.get(), link.ctx.get());
+      if (rc != GP_ERROR_CAMERA_BUSY || Clock::now() >= busy_until) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
     if (rc < GP_OK)
       link.fail(rc, "triggering the capture", true,
-                rc == GP_ERROR_CAMERA_BUSY ? "the camera is busy (still saving?)" : "");
-    using Clock = std::chrono::steady_clock;
+                rc == GP_ERROR_CAMERA_BUSY ? "the camera stayed busy" : "");
     const double limit_s = exposure_s + config.capture_timeout_s;
     const auto deadline = Clock::now() + std::chrono::duration<double>(limit_s);
     for (;;) {

@@ -14,7 +14,8 @@
 // the "hardware" CTest label.
 //
 // Watchdog: every libgphoto2 socket and USB operation has its own timeout; the wait for the new
-// file gives up after the exposure plus Gphoto2Config::capture_timeout_s. A failed or timed-out
+// file gives up after the exposure plus Gphoto2Config::capture_timeout_s; a camera answering
+// DeviceBusy to the trigger is asked again for up to capture_timeout_s. A failed or timed-out
 // capture, trigger, download, truncated file or refused setting throws a transient DeviceError:
 // the capture session reconnects (reconnect()) and retries, and stops with the session saved
 // after its retries run out. Persistent: no camera, a setting the camera does not have, a file

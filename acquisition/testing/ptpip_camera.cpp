@@ -480,8 +480,10 @@ struct PtpIpCamera::Impl {
   bool handle(int cmd, int evt, const Request& r) {
     const uint32_t t = r.transaction;
     switch (r.code) {
-      case kGetDeviceInfo:
-        return sendData(cmd, t, deviceInfo(), deviceInfo().size()) && respond(cmd, kOk, t);
+      case kGetDeviceInfo: {
+        const std::string info = deviceInfo();
+        return sendData(cmd, t, info, info.size()) && respond(cmd, kOk, t);
+      }
       case kOpenSession: {
         std::lock_guard<std::mutex> lock(mutex);
         session_open = true;
