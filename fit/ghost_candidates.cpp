@@ -346,42 +346,33 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
     if (l.side != BorderSide::kLeft || light_edge[l.id]) continue;
     for (const auto& r : traces) {
       if (r.side != BorderSide::kRight || light_edge[r.id]) continue;
-      // The frames both traces span, each border where its trace is (its point, or its curve
-      // across a gap): a border hidden for a frame or two still bounds its ghost there.
-      const int first = std::max(l.firstRow(), r.firstRow()), last = std::min(l.lastRow(), r.lastRow());
-      if (last - first + 1 < o.min_shared_rows) continue;
-      auto x = [&](const BorderTrace& t, int row) {
-        const BorderPoint* q = t.at(row);
-        return q ? q->x_px : t.x_of_angle.evaluate(s.angles_deg[row]);
-      };
-      // Each border's step, the median of its trace's over those frames.
-      auto step = [&](const BorderTrace& t) {
-        std::vector<double> jumps;
-        for (const auto& q : t.points)
-          if (q.row >= first && q.row <= last && q.jump > 0) jumps.push_back(q.jump);
-        return jumps.empty() ? 0.0 : median(jumps);
-      };
-      const double step_l = step(l), step_r = step(r);
-      if (!(step_l > 0 && step_r > 0)) continue;
-      const double steps = std::abs(std::log(step_l / step_r));
-      if (steps > std::log(o.max_step_ratio)) continue;
-      std::vector<double> angles, widths, centres;
+      if (r.lastRow() < l.firstRow() || l.lastRow() < r.firstRow()) continue;
+      std::vector<double> ratios, angles, widths;
       bool crossed = false;
-      for (int row = first; row <= last; ++row) {
-        const double xl = x(l, row), xr = x(r, row);
-        crossed |= xr <= xl + 1;
-        angles.push_back(s.angles_deg[row]);
-        widths.push_back(0.5 * (xr - xl));
-        centres.push_back(0.5 * (xl + xr));
+      for (const auto& p : l.points) {
+        const BorderPoint* q = r.at(p.row);
+        if (!q) continue;
+        if (q->x_px <= p.x_px + 1) crossed = true;
+        else if (p.jump > 0 && q->jump > 0) {
+          ratios.push_back(std::abs(std::log(p.jump / q->jump)));
+          angles.push_back(s.angles_deg[p.row]);
+          widths.push_back(0.5 * (q->x_px - p.x_px));
+        }
       }
-      if (crossed) continue;
+      if (crossed || static_cast<int>(ratios.size()) < o.min_shared_rows) continue;
+      const double steps = median(ratios);
+      if (steps > std::log(o.max_step_ratio)) continue;
       // A ghost keeps its size as it moves (its two borders move alike; paraxially exactly): the
       // relative change of the half-width per degree counts against a pair.
       const model::Polynomial w = leastSquaresPolynomial(angles, widths, 1);
       const double mean_width = std::accumulate(widths.begin(), widths.end(), 0.0) / widths.size();
       const double growth = w.coefficients.size() > 1 ? std::abs(w.coefficients[1]) / mean_width : 0.0;
       if (growth > o.max_width_change_per_deg) continue;
-      pairs.push_back(Pair{steps + growth, l.id, r.id, angles, centres, mean_width});
+      Pair pair{steps + growth, l.id, r.id, angles, {}, mean_width};
+      for (const auto& p : l.points)
+        if (const BorderPoint* q = r.at(p.row); q && q->x_px > p.x_px + 1 && p.jump > 0 && q->jump > 0)
+          pair.centres.push_back(0.5 * (p.x_px + q->x_px));
+      pairs.push_back(std::move(pair));
     }
   }
   const std::optional<ZeroOfPairs> zero = keepPairsThroughTheZero(s, o, pairs);

@@ -38,7 +38,7 @@
 namespace flarekit::fit {
 
 struct CandidateOptions {
-  int min_shared_rows = 3;          // a pair's traces span at least this many frames together (≥ 1)
+  int min_shared_rows = 3;          // a pair's traces share at least this many frames (≥ 1)
   double max_step_ratio = 2.5;      // their steps differ by at most this factor (> 1)
   double max_width_change_per_deg = 0.15;  // their distance changes by at most this fraction a degree
   double max_centre_rms_px = 2;     // their middle's distance from an odd curve about the zero
