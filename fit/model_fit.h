@@ -8,10 +8,11 @@
 // themselves are then refined against the frames directly, in one Ceres problem whose parameter
 // blocks are each ghost's coefficients and whose residuals are the frames' pixels (a stride of
 // frames, each at a level of its pyramid), each frame's in units of its brightest ghost's peak,
-// as PSNR weighs a frame's error. It is off by
-// default: while ghosts are missed or spurious, it bends the found ones over what the others
-// leave (docs/fitting.md). The pedestal under the ghosts is fitted last, to what the model's
-// ghosts leave of every frame, and kept as polynomials too.
+// as PSNR weighs a frame's error. It is off by default: while ghosts are missed or spurious, it
+// bends the found ones over what the others leave (docs/fitting.md). A ghost is kept over the
+// frames where its shades draw light above the noise, and dropped where they never do. The
+// pedestal under the ghosts is fitted last, to what the model's ghosts leave of every frame, and
+// kept as polynomials too.
 
 #include <string>
 #include <vector>
