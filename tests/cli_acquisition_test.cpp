@@ -180,7 +180,8 @@ std::pair<double, double> relativeDifference(const cv::Mat& a, const cv::Mat& b)
 // umockdev-wrapper) and the camera is the PTP/IP test camera, both served by this process: the
 // camera renders the lens at the angle the emulated Tic stands at, so the frames are right only
 // if the command really moved the head. Its merged frames are compared with those of the same
-// capture made by `flarekit capture` with the simulated rig directly.
+// capture made by `flarekit capture` with the simulated rig directly. rig-check of the same rig
+// finds both devices.
 TEST(CliCapture, TetheredCaptureThroughTicAndPtpIpMatchesTheSimulatedCamera) {
   TempDir dir;
   // The simulated rig: sim-nikon at 96 × 64 px.
@@ -245,6 +246,14 @@ TEST(CliCapture, TetheredCaptureThroughTicAndPtpIpMatchesTheSimulatedCamera) {
       << "\n[capture]\niso = 100\nf_number = 5.6\nretry_delay_s = 0\n";
   geometry = acquisition::loadRig(dir / "tethered.toml").tic.geometry;
   ASSERT_EQ(geometry.microstepsPerDeg(), 40);
+
+  // rig-check finds both devices the rig names.
+  auto check = testing::runProgram(
+      "umockdev-wrapper", {FLAREKIT_BINARY, "rig-check", (dir / "tethered.toml").string()}, 60);
+  EXPECT_EQ(check.exit_code, 0) << check.out << check.err;
+  EXPECT_NE(check.out.find("found Pololu Tic T834 serial 00314159 (used)"), std::string::npos) << check.out;
+  EXPECT_NE(check.out.find("found camera PTP/IP Camera on " + camera.gphoto2Port()), std::string::npos)
+      << check.out;
 
   std::vector<std::string> args = {FLAREKIT_BINARY, "capture", "--rig",
                                    (dir / "tethered.toml").string(), "--out",
