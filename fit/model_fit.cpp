@@ -272,11 +272,9 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
         }
     }
   }
-  // Shades are ≥ 0 (the model file holds them so over each ghost's range): an active set over the
-  // check points. Where a polynomial dips below, it is held at its lowest point and all are solved
-  // again (the held points as equality constraints); a held point whose multiplier says the
-  // frames would lift the polynomial there is let go, so that a curve held at one place and then
-  // another is not pinned to 0 everywhere. Held a hair above 0, not at it, so that rounding in
+  // Shades are ≥ 0 (the model file holds them so over each ghost's range): where a polynomial
+  // dips below, it is held at its lowest point and all are solved again (with the held points as
+  // equality constraints), until none dips. Held a hair above 0, not at it, so that rounding in
   // the model file's powers of θ cannot take it below. Checked where the model file is checked.
   constexpr int kChecks = 129;
   constexpr double kHeldAt = 1e-6;  // of the brightest shade
@@ -298,28 +296,7 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
   for (size_t g = 0; g < curves.size(); ++g)
     for (int q = 0; q < 2 && u.degree[g] >= 0; ++q)
       for (int i = 0; i < kChecks; ++i) brightest = std::max(brightest, std::abs(value(g, q, i)));
-  // x under the held points: N x + Σ μ_j c_j = r, c_j x = held value. μ_j > 0: the held point
-  // pulls its polynomial down, the frames would lift it off 0 there, and it is let go.
-  auto solveHeld = [&] {
-    const int h = static_cast<int>(held.size());
-    Eigen::MatrixXd kkt = Eigen::MatrixXd::Zero(u.total + h, u.total + h);
-    kkt.topLeftCorner(u.total, u.total) = n;
-    for (int j = 0; j < h; ++j) {
-      kkt.block(u.total + j, 0, 1, u.total) = held[j].transpose();
-      kkt.block(0, u.total + j, u.total, 1) = held[j];
-    }
-    Eigen::VectorXd rhs = Eigen::VectorXd::Constant(u.total + h, kHeldAt * brightest);
-    rhs.head(u.total) = r;
-    const Eigen::VectorXd solution = kkt.completeOrthogonalDecomposition().solve(rhs);
-    x = solution.head(u.total);
-    std::vector<Eigen::VectorXd> kept;
-    for (int j = 0; j < h; ++j)
-      if (!(solution(u.total + j) > 0)) kept.push_back(std::move(held[j]));
-    const bool let_go = kept.size() < held.size();
-    held = std::move(kept);
-    return let_go;
-  };
-  for (int round = 0; round < 2 * u.total; ++round) {
+  for (int round = 0; round < u.total; ++round) {
     bool dipped = false;
     for (size_t g = 0; g < curves.size(); ++g) {
       const int d = u.degree[g];
@@ -337,8 +314,16 @@ Eigen::VectorXd solveShades(const std::vector<GhostCurves>& curves, const std::v
       }
     }
     if (!dipped) break;
-    while (solveHeld()) {
+    const int h = static_cast<int>(held.size());
+    Eigen::MatrixXd kkt = Eigen::MatrixXd::Zero(u.total + h, u.total + h);
+    kkt.topLeftCorner(u.total, u.total) = n;
+    for (int j = 0; j < h; ++j) {
+      kkt.block(u.total + j, 0, 1, u.total) = held[j].transpose();
+      kkt.block(0, u.total + j, u.total, 1) = held[j];
     }
+    Eigen::VectorXd rhs = Eigen::VectorXd::Constant(u.total + h, kHeldAt * brightest);
+    rhs.head(u.total) = r;
+    x = kkt.completeOrthogonalDecomposition().solve(rhs).head(u.total);
   }
   return x;
 }
