@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <iterator>
 #include <limits>
 #include <map>
 
@@ -621,24 +622,27 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   // already draw gets shades of about 0 and is no ghost there.
   std::vector<GhostCurves> seen;
   for (auto& c : curves) {
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    // The fitted frames in its range, and whether it draws light in each.
+    std::vector<std::pair<double, bool>> lit;
     for (const auto& f : fits) {
       const double angle = m.capture.fieldAngle(f.angle_deg);
       if (!c.covers(angle)) continue;
       const model::GhostParameters q = c.at(angle, channels, c.block.data());
       double peak = 0;
       for (int ch = 0; ch < channels; ++ch) peak = std::max({peak, q.border[ch], q.inside[ch]});
-      if (peak >= o.min_peak_sigma * f.noise_sigma) {
-        lo = std::min(lo, angle);
-        hi = std::max(hi, angle);
-      }
+      lit.emplace_back(angle, peak >= o.min_peak_sigma * f.noise_sigma);
     }
-    if (lo > hi) {
+    std::sort(lit.begin(), lit.end());
+    auto first = std::find_if(lit.begin(), lit.end(), [](const auto& a) { return a.second; });
+    if (first == lit.end()) {
       ++sum.ghosts_unseen;
       continue;
     }
-    c.angle_min = std::max(c.angle_min, lo - half_step);
-    c.angle_max = std::min(c.angle_max, hi + half_step);
+    auto last = std::find_if(lit.rbegin(), lit.rend(), [](const auto& a) { return a.second; });
+    // It ends before the first dark fitted frame beyond its lit ones (the frames between, not
+    // fitted, are taken as lit); where there is none, where its candidate ends.
+    if (first != lit.begin()) c.angle_min = std::max(c.angle_min, std::prev(first)->first + half_step);
+    if (last != lit.rbegin()) c.angle_max = std::min(c.angle_max, std::prev(last)->first - half_step);
     seen.push_back(std::move(c));
   }
   curves = std::move(seen);
