@@ -100,21 +100,6 @@ CapturePlan spotPlan() {
 
 nlohmann::json manifest(const fs::path& dir) { return loadJsonFile(dir / "manifest.json").json(); }
 
-// Median and largest of |a − b| / |b| over the photosites where b ≠ 0.
-std::pair<double, double> relativeDifference(const cv::Mat& a, const cv::Mat& b) {
-  cv::Mat fa = a.reshape(1), fb = b.reshape(1);
-  std::vector<double> d;
-  for (int y = 0; y < fa.rows; ++y)
-    for (int x = 0; x < fa.cols; ++x) {
-      const double r = fb.at<float>(y, x);
-      if (r != 0) d.push_back(std::abs(fa.at<float>(y, x) - r) / std::abs(r));
-    }
-  if (d.empty()) return {1e300, 1e300};
-  const double largest = *std::max_element(d.begin(), d.end());
-  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-  return {d[d.size() / 2], largest};
-}
-
 // Every frame of a finished capture in `dir` equals the same frame of `reference` (same units).
 void expectSameFrames(const fs::path& dir, const fs::path& reference, double scale = 1.0) {
   const auto m = manifest(dir), r = manifest(reference);
@@ -124,7 +109,7 @@ void expectSameFrames(const fs::path& dir, const fs::path& reference, double sca
     const cv::Mat a = readExrLayer(dir / m["frames"][i]["file"].get<std::string>(), "");
     const cv::Mat b = readExrLayer(reference / r["frames"][i]["file"].get<std::string>(), "") * scale;
     ASSERT_EQ(a.size(), b.size());
-    EXPECT_LE(relativeDifference(a, b).second, 1e-5) << "frame " << i;
+    EXPECT_LE(testing::relativeDifference(a, b).second, 1e-5) << "frame " << i;
   }
 }
 
@@ -230,7 +215,7 @@ TEST(Gphoto2PtpIp, CaptureOfASimulatedLensMatchesTheDirectCapture) {
     const cv::Mat b = readExrLayer(dir.path() / "direct" / d["frames"][i]["file"].get<std::string>(), "") *
                       direct_rig.sensor.electrons_per_unit_s;
     ASSERT_EQ(a.size(), b.size());
-    const auto [median, largest] = relativeDifference(a, b);
+    const auto [median, largest] = testing::relativeDifference(a, b);
     std::printf("frame %zu (%.1f deg): median relative difference %.3g, largest %.3g\n", i,
                 m["frames"][i]["angle_deg"].get<double>(), median, largest);
     EXPECT_LE(median, 0.01) << "frame " << i;  // the target

@@ -4,12 +4,14 @@
 // sensor, and simulated head and camera on one stage.
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <random>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -78,6 +80,22 @@ inline RigDevices spotDevices(const Rig& rig, std::shared_ptr<SceneProvider> sce
   d.camera = std::make_unique<SimulatedCamera>(
       stage, std::move(scene), exposeSpot, Cfa::kMono, 100.0, [](double) { return 4095.0; }, 1, rig.faults);
   return d;
+}
+
+// Median and largest of |a − b| / |b| over the values (of every channel) where b ≠ 0: how far two
+// captures of the same frames differ. {1e300, 1e300} when b is 0 everywhere.
+inline std::pair<double, double> relativeDifference(const cv::Mat& a, const cv::Mat& b) {
+  const cv::Mat fa = a.reshape(1), fb = b.reshape(1);
+  std::vector<double> d;
+  for (int y = 0; y < fa.rows; ++y)
+    for (int x = 0; x < fa.cols; ++x) {
+      const double r = fb.at<float>(y, x);
+      if (r != 0) d.push_back(std::abs(fa.at<float>(y, x) - r) / std::abs(r));
+    }
+  if (d.empty()) return {1e300, 1e300};
+  const double largest = *std::max_element(d.begin(), d.end());
+  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+  return {d[d.size() / 2], largest};
 }
 
 }  // namespace flarekit::testing

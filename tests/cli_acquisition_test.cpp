@@ -29,6 +29,7 @@
 #ifdef FLAREKIT_WITH_PTPIP_CAMERA
 #include "acquisition/render_scene.h"
 #include "acquisition/stepper_motion.h"
+#include "acquisition/testing.h"
 #include "acquisition/testing/ptpip_camera.h"
 #include "acquisition/testing/tic_emulator.h"
 #endif
@@ -159,21 +160,6 @@ TEST(CliRig, RigCheckFindsAPtpIpCamera) {
 #endif
 
 #ifdef FLAREKIT_WITH_PTPIP_CAMERA
-// Median and largest of |a − b| / |b| over the photosites where b ≠ 0.
-std::pair<double, double> relativeDifference(const cv::Mat& a, const cv::Mat& b) {
-  const cv::Mat fa = a.reshape(1), fb = b.reshape(1);
-  std::vector<double> d;
-  for (int y = 0; y < fa.rows; ++y)
-    for (int x = 0; x < fa.cols; ++x) {
-      const double r = fb.at<float>(y, x);
-      if (r != 0) d.push_back(std::abs(fa.at<float>(y, x) - r) / std::abs(r));
-    }
-  if (d.empty()) return {1e300, 1e300};
-  const double largest = *std::max_element(d.begin(), d.end());
-  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-  return {d[d.size() / 2], largest};
-}
-
 // Issue 61's target, end to end: `flarekit capture --rig` with a real rig file (a Pololu Tic head
 // and a gphoto2 camera at a ptpip: port) takes the 0–5° capture of the simulated Nikon lens through
 // libusb, libgphoto2 and LibRaw. The Tic is emulated (umockdev; the command runs under
@@ -277,7 +263,7 @@ TEST(CliCapture, TetheredCaptureThroughTicAndPtpIpMatchesTheSimulatedCamera) {
     const cv::Mat b = readExrLayer(dir / "direct" / d["frames"][i]["file"].get<std::string>(), "") *
                       sim_rig.sensor.electrons_per_unit_s;
     ASSERT_EQ(a.size(), b.size());
-    const auto [median, largest] = relativeDifference(a, b);
+    const auto [median, largest] = testing::relativeDifference(a, b);
     std::printf("frame %zu (%.1f deg): median relative difference %.3g, largest %.3g\n", i,
                 m["frames"][i]["angle_deg"].get<double>(), median, largest);
     EXPECT_LE(median, 0.01) << "frame " << i;  // the issue's target
