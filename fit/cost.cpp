@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include <opencv2/imgproc.hpp>
@@ -77,7 +78,29 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
   return 1.4826 * values[values.size() / 2];
 }
 
-double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
+double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid, int block_px) {
+  if (block_px > 1) {
+    // Block means over the channels' mean; invalid blocks are NaN and left out.
+    const int rows = image.rows / block_px, cols = image.cols / block_px, c = image.channels();
+    cv::Mat means(rows, cols, CV_32F);
+    for (int by = 0; by < rows; ++by)
+      for (int bx = 0; bx < cols; ++bx) {
+        double sum = 0;
+        bool whole = true;
+        for (int y = by * block_px; y < (by + 1) * block_px && whole; ++y) {
+          const float* p = image.ptr<float>(y);
+          const uchar* v = valid.ptr<uchar>(y);
+          for (int x = bx * block_px; x < (bx + 1) * block_px; ++x) {
+            whole = whole && v[x];
+            for (int k = 0; k < c; ++k) sum += p[x * c + k];
+          }
+        }
+        means.at<float>(by, bx) = whole ? static_cast<float>(sum / (c * block_px * block_px))
+                                        : std::numeric_limits<float>::quiet_NaN();
+      }
+    cv::Mat valid_means = means == means;
+    return block_px * estimatePixelNoiseSigma(cv::Mat(means).setTo(0, ~valid_means), valid_means);
+  }
   std::vector<float> differences;
   const int c = image.channels();
   differences.reserve(image.total());

@@ -138,8 +138,16 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 // The noise σ of the pixels: 1.4826 / √2 × the median absolute difference of horizontal
 // neighbours (mean over channels), over every row. Ghosts, veils and the light's fall-off change
 // little from one pixel to the next, and their edges are too few to move the median, so a frame
-// full of veils does not inflate it.
-double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
+// full of veils does not inflate it. With block_px > 1, of neighbouring block_px × block_px means
+// (wholly valid ones), times block_px: the photosites' noise where a demosaic has smoothed the
+// pixels and made neighbours alike, so that a mono and an RGGB capture of the same light get the
+// same σ.
+double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid, int block_px = 1);
+
+// The block width at which noise is measured independently of the sensor's layout: 4 px, past a
+// bilinear demosaic's 3×3 reach, so its smoothing no longer hides the photosites' noise (RGGB
+// luminance: 0.53 × the photosites' σ per pixel, 0.97 × at 4 px, 1.1 × at 16).
+inline constexpr int kNoiseBlockPx = 4;
 
 // The cost of one group of ghosts (those that overlap, fitted jointly) in one frame. Holds the
 // residual and Jacobian images at the last evaluated point. Not thread-safe itself; Ceres's

@@ -90,6 +90,29 @@ TEST(EstimatePixelNoiseSigma, FrameFillingVeilsDoNotInflateIt) {
   EXPECT_NEAR(estimatePixelNoiseSigma(flat, valid), sigma, 0.1 * sigma);
 }
 
+// Over 4 px blocks the noise of an RGGB mosaic demosaiced is the photosites' again, where per
+// pixel the demosaic halves it; a mono frame's is its σ either way, veils and all.
+TEST(EstimatePixelNoiseSigma, OverBlocksADemosaicDoesNotLowerIt) {
+  const cv::Size size(320, 240);
+  const double sigma = 1e-4;
+  cv::Mat white(size, CV_32F);
+  cv::RNG(11).fill(white, cv::RNG::NORMAL, 0, sigma);
+  const cv::Mat valid(size, CV_8U, cv::Scalar(255));
+  const cv::Mat demosaiced = testing::bayerLuminance(white);
+  EXPECT_LT(estimatePixelNoiseSigma(demosaiced, valid), 0.6 * sigma);
+  EXPECT_NEAR(estimatePixelNoiseSigma(demosaiced, valid, kNoiseBlockPx), sigma, 0.1 * sigma);
+  EXPECT_NEAR(estimatePixelNoiseSigma(white, valid, kNoiseBlockPx), sigma, 0.1 * sigma);
+  const std::vector<GhostParameters> veils = {ghost(40, 120, 250, 250, 250, 0.005, 0.005),
+                                              ghost(200, 120, 90, 90, 90, 0.002, 0.002)};
+  const cv::Mat veiled = model::renderGhosts(veils, size, 1) + white;
+  EXPECT_NEAR(estimatePixelNoiseSigma(veiled, valid, kNoiseBlockPx), sigma, 0.15 * sigma);
+  // Blocks with an invalid pixel are left out: a saturated, flat stripe changes nothing.
+  cv::Mat flat = white.clone(), part = valid.clone();
+  flat(cv::Rect(0, 0, 30, 240)).setTo(1.0);
+  part(cv::Rect(0, 0, 30, 240)).setTo(0);
+  EXPECT_NEAR(estimatePixelNoiseSigma(flat, part, kNoiseBlockPx), sigma, 0.1 * sigma);
+}
+
 TEST(GroupCost, AnalyticJacobianMatchesGradientChecker) {
   const cv::Size size(96, 72);
   const std::vector<GhostParameters> truth = {ghost(44, 36, 18, 22, 15, 1.0, 0.4),

@@ -52,9 +52,6 @@ namespace flarekit::fit {
 // pixels: 1.4826 × the median absolute deviation of the noise's means over block_px × block_px
 // blocks (wholly valid ones), times block_px; per pixel at block_px 1. The MAD, not the RMS, is the
 // typical (background) pixel's, not the light core's shot noise. 0 when no block is valid.
-// 4 px: past a bilinear demosaic's 3×3 reach, so its smoothing no longer hides the photosites'
-// noise (RGGB luminance: 0.53 × the photosites' σ per pixel, 0.97 × at 4 px, 1.1 × at 16).
-inline constexpr int kNoiseBlockPx = 4;
 double noiseFloor(const cv::Mat& noise, const cv::Mat& valid, int block_px = kNoiseBlockPx);
 
 struct EvaluationOptions {

@@ -197,30 +197,6 @@ TEST(EvaluateModel, NoiseFloorIsTheBackgroundsNotTheLightsShotNoise) {
   EXPECT_EQ(ev.true_ghosts_found, 1);
 }
 
-// The luminance (Rec. 709) of an RGGB mosaic of `photosites` demosaiced bilinearly, as the
-// simulated camera does (acquisition/hdr_merge.h demosaicBilinear): each colour the mean of its
-// sites in the 3×3 neighbourhood, a site's own value where it has that colour.
-cv::Mat bayerLuminance(const cv::Mat& photosites) {
-  auto colour = [](int y, int x) { return y % 2 == 0 ? (x % 2 == 0 ? 0 : 1) : (x % 2 == 0 ? 1 : 2); };
-  cv::Mat rgb(photosites.size(), CV_32FC3);
-  for (int y = 0; y < photosites.rows; ++y)
-    for (int x = 0; x < photosites.cols; ++x) {
-      double sum[3] = {0, 0, 0};
-      int count[3] = {0, 0, 0};
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int yy = y + dy, xx = x + dx;
-          if (yy < 0 || yy >= photosites.rows || xx < 0 || xx >= photosites.cols) continue;
-          const int c = colour(yy, xx);
-          if (c == colour(y, x) && (dx != 0 || dy != 0)) continue;
-          sum[c] += photosites.at<float>(yy, xx);
-          ++count[c];
-        }
-      for (int c = 0; c < 3; ++c) rgb.at<cv::Vec3f>(y, x)[c] = static_cast<float>(sum[c] / count[c]);
-    }
-  return luminance(rgb);
-}
-
 // The noise floor of white noise is its σ, per pixel or over blocks. The same photosites' noise
 // demosaiced from an RGGB mosaic has half that spread per pixel; over blocks its floor is within
 // 10 % of the white noise's.
@@ -230,7 +206,7 @@ TEST(NoiseFloor, ADemosaicsSmoothingDoesNotLowerIt) {
   const cv::Mat valid(size, CV_8U, cv::Scalar(255));
   EXPECT_NEAR(noiseFloor(white, valid, 1), 1e-4, 3e-6);
   EXPECT_NEAR(noiseFloor(white, valid), 1e-4, 5e-6);
-  const cv::Mat bayer = bayerLuminance(white);
+  const cv::Mat bayer = testing::bayerLuminance(white);
   EXPECT_LT(noiseFloor(bayer, valid, 1), 0.6 * noiseFloor(white, valid, 1));
   EXPECT_NEAR(noiseFloor(bayer, valid) / noiseFloor(white, valid), 1, 0.1);
   // Invalid pixels leave their blocks out; with none valid there is no floor.
@@ -247,7 +223,7 @@ TEST(EvaluateModel, VisibilityDoesNotDependOnTheSensorsLayout) {
   TempDir dir;
   const model::GhostParameters g = disc(100, 65, 20, 1.4e-3);
   const cv::Mat white = whiteNoise(kSize, 1e-4, 5);
-  const cv::Mat demosaiced = bayerLuminance(white);
+  const cv::Mat demosaiced = testing::bayerLuminance(white);
   for (const cv::Mat& noise : {white, demosaiced}) {
     const cv::Mat ghost = render(g);
     const auto ev = evaluateModel(modelOf(g), stackOf(dir, ghost + noise, ghost, ghost));

@@ -617,20 +617,26 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   sum.seconds_refine = since(t_refine);
 
   // 3. Each ghost's range ends where it draws nothing the frames can show: its brightest value
-  // (Ib or Ii, in any channel) below min_peak_sigma × the frame's noise σ. The shades decide
-  // where a ghost is, not the candidates' traces alone: a trace's ghost whose light the others
-  // already draw gets shades of about 0 and is no ghost there.
+  // (Ib or Ii, in any channel) below min_peak_sigma × the frame's noise σ (measured at
+  // kNoiseBlockPx, as a mono and an RGGB sensor show it alike). The shades decide where a ghost
+  // is, not the candidates' traces alone: a trace's ghost whose light the others already draw
+  // gets shades of about 0 and is no ghost there.
+  std::vector<double> noise(fits.size());
+  tbb::parallel_for(size_t{0}, fits.size(), [&](size_t i) {
+    const Frame& f = stack.frames[static_cast<size_t>(fits[i].frame)];
+    noise[i] = estimatePixelNoiseSigma(f.image, f.valid, kNoiseBlockPx);
+  });
   std::vector<GhostCurves> seen;
   for (auto& c : curves) {
     // The fitted frames in its range, and whether it draws light in each.
     std::vector<std::pair<double, bool>> lit;
-    for (const auto& f : fits) {
-      const double angle = m.capture.fieldAngle(f.angle_deg);
+    for (size_t i = 0; i < fits.size(); ++i) {
+      const double angle = m.capture.fieldAngle(fits[i].angle_deg);
       if (!c.covers(angle)) continue;
       const model::GhostParameters q = c.at(angle, channels, c.block.data());
       double peak = 0;
       for (int ch = 0; ch < channels; ++ch) peak = std::max({peak, q.border[ch], q.inside[ch]});
-      lit.emplace_back(angle, peak >= o.min_peak_sigma * f.noise_sigma);
+      lit.emplace_back(angle, peak >= o.min_peak_sigma * noise[i]);
     }
     std::sort(lit.begin(), lit.end());
     auto first = std::find_if(lit.begin(), lit.end(), [](const auto& a) { return a.second; });

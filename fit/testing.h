@@ -8,6 +8,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "common/image.h"
 #include "fit/frames.h"
 #include "model/ghost_shape.h"
 #include "model/model_renderer.h"
@@ -111,6 +112,30 @@ inline std::vector<double> anglesFrom(double first, double last, double step) {
   std::vector<double> a;
   for (int i = 0; first + i * step <= last + 1e-9; ++i) a.push_back(first + i * step);
   return a;
+}
+
+// The luminance (Rec. 709) of an RGGB mosaic of `photosites` demosaiced bilinearly, as the
+// simulated camera does (acquisition/hdr_merge.h demosaicBilinear): each colour the mean of its
+// sites in the 3×3 neighbourhood, a site's own value where it has that colour.
+inline cv::Mat bayerLuminance(const cv::Mat& photosites) {
+  auto colour = [](int y, int x) { return y % 2 == 0 ? (x % 2 == 0 ? 0 : 1) : (x % 2 == 0 ? 1 : 2); };
+  cv::Mat rgb(photosites.size(), CV_32FC3);
+  for (int y = 0; y < photosites.rows; ++y)
+    for (int x = 0; x < photosites.cols; ++x) {
+      double sum[3] = {0, 0, 0};
+      int count[3] = {0, 0, 0};
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int yy = y + dy, xx = x + dx;
+          if (yy < 0 || yy >= photosites.rows || xx < 0 || xx >= photosites.cols) continue;
+          const int c = colour(yy, xx);
+          if (c == colour(y, x) && (dx != 0 || dy != 0)) continue;
+          sum[c] += photosites.at<float>(yy, xx);
+          ++count[c];
+        }
+      for (int c = 0; c < 3; ++c) rgb.at<cv::Vec3f>(y, x)[c] = static_cast<float>(sum[c] / count[c]);
+    }
+  return luminance(rgb);
 }
 
 }  // namespace flarekit::fit::testing
