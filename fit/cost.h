@@ -144,9 +144,8 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid);
 // same σ.
 double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid, int block_px = 1);
 
-// The block width at which noise is measured independently of the sensor's layout: 4 px, past a
-// bilinear demosaic's 3×3 reach, so its smoothing no longer hides the photosites' noise (RGGB
-// luminance: 0.53 × the photosites' σ per pixel, 0.97 × at 4 px, 1.1 × at 16).
+// The block width at which noise is measured independently of the sensor's layout: past a
+// bilinear demosaic's 3×3 reach, where its smoothing no longer hides the photosites' noise.
 inline constexpr int kNoiseBlockPx = 4;
 
 // The cost of one group of ghosts (those that overlap, fitted jointly) in one frame. Holds the
