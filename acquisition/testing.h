@@ -1,21 +1,25 @@
 #pragma once
 // A small synthetic rig for acquisition's tests and the capture fuzz targets (header-only; not
 // part of the library): a 32×24 scene with one spot that follows the angle, a 12-bit Poisson
-// sensor, and simulated head and camera on one stage.
+// sensor, and simulated head and camera on one stage; and how far two captures' frames differ.
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <random>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "acquisition/simulated_camera.h"
+#include "common/config.h"
 #include "common/exr.h"
 
 namespace flarekit::testing {
@@ -96,6 +100,31 @@ inline std::pair<double, double> relativeDifference(const cv::Mat& a, const cv::
   const double largest = *std::max_element(d.begin(), d.end());
   std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
   return {d[d.size() / 2], largest};
+}
+
+// How far each frame of the finished capture in `dir` lies from the same frame of `reference`,
+// whose values are first multiplied by `scale` (a real camera's electrons/s against the simulated
+// camera's render units): relativeDifference per frame, for as many frames as both manifests list.
+struct FrameDifference {
+  double angle_deg = 0;
+  double median = 0, largest = 0;  // {1e300, 1e300} where the two frames' sizes differ
+};
+inline std::vector<FrameDifference> frameDifferences(const std::filesystem::path& dir,
+                                                     const std::filesystem::path& reference,
+                                                     double scale = 1.0) {
+  const nlohmann::json m = loadJsonFile(dir / "manifest.json").json();
+  const nlohmann::json r = loadJsonFile(reference / "manifest.json").json();
+  std::vector<FrameDifference> out;
+  for (size_t i = 0; i < std::min(m["frames"].size(), r["frames"].size()); ++i) {
+    const cv::Mat a = readExrLayer(dir / m["frames"][i]["file"].get<std::string>(), "");
+    const cv::Mat b = readExrLayer(reference / r["frames"][i]["file"].get<std::string>(), "") * scale;
+    FrameDifference d;
+    d.angle_deg = m["frames"][i]["angle_deg"].get<double>();
+    if (a.size() == b.size() && a.type() == b.type()) std::tie(d.median, d.largest) = relativeDifference(a, b);
+    else d.median = d.largest = 1e300;
+    out.push_back(d);
+  }
+  return out;
 }
 
 }  // namespace flarekit::testing
