@@ -13,6 +13,7 @@ namespace {
 
 struct RasterVertex {
   float x, y, u, v, r, t;
+  float e;  // irradiance at the ray (vertexIrradiance), 0 where no whole cell is beside it
 };
 
 // Whether points spanning [min_x, max_x] × [min_y, max_y] (pixel coordinates) lie wholly off
@@ -26,9 +27,12 @@ bool offImage(float min_x, float max_x, float min_y, float max_y, const SensorMa
 // stays above 1 at every pixel inside the triangle.
 constexpr float kClearMargin = 1e-5f;
 
+// A triangle Gouraud-shaded (see the end) sets *smooth_flux to the integral of its corners'
+// irradiance over it, in the units of cell_flux / pitch², and leaves it 0 otherwise.
 bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const SensorMapping& m,
                   const Aperture& aperture, double cell_flux, const cv::Vec3f& weight, int batch,
-                  RasterTriangle* out) {
+                  RasterTriangle* out, double* smooth_flux) {
+  *smooth_flux = 0;
   const float min_x = std::min({p0.x, p1.x, p2.x}), max_x = std::max({p0.x, p1.x, p2.x});
   const float min_y = std::min({p0.y, p1.y, p2.y}), max_y = std::max({p0.y, p1.y, p2.y});
   // Off the image first, the cheapest test and the commonest end: at 10° four in five of the
@@ -118,10 +122,19 @@ bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const Senso
   }
   t.interior = interior;
   t.rim_clear = std::max({p0.r, p1.r, p2.r}) <= 1.0f - t.rim_footprint - kClearMargin;
-  // Flux of the triangle's pupil area spread over its sensor area (Hullin 2011 §3.2: intensity
-  // from the area ratio of the ray-grid cells), in relative irradiance.
-  const double scale = cell_flux / (area2 * m.pixel_pitch_mm * m.pixel_pitch_mm);
-  t.weight = weight * static_cast<float>(scale);
+  // Irradiance from the area ratio of the ray-grid cells (Hullin 2011 §3.2), Gouraud-shaded
+  // (their §5, "smooth shading"): each corner's irradiance, interpolated with T, so that a ghost's
+  // light varies continuously over the grid's cells, as a real ghost's does, instead of stepping
+  // at every cell's edge. A splatted triangle (a caustic's) and one with a corner beside no whole
+  // cell carry their own half cell's flux over their area instead, which conserves it exactly.
+  if (!t.splat && p0.e > 0 && p1.e > 0 && p2.e > 0) {
+    plane(p0.t * p0.e, p1.t * p1.e, p2.t * p2.e, &t.t0, &t.tx, &t.ty);
+    t.weight = weight;
+    *smooth_flux = 0.5 * area2 * (static_cast<double>(p0.e) + p1.e + p2.e) / 3.0;
+  } else {
+    const double scale = cell_flux / (area2 * m.pixel_pitch_mm * m.pixel_pitch_mm);
+    t.weight = weight * static_cast<float>(scale);
+  }
   t.batch = batch;
   return true;
 }
@@ -143,14 +156,47 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
     pixel_x[k] = static_cast<float>(mapping.toPixelX(rays.x_mm[first_ray + k]));
     pixel_y[k] = static_cast<float>(mapping.toPixelY(rays.y_mm[first_ray + k]));
   }
+  // Each ray's irradiance: the flux of the cells beside it that show part of the ghost over their
+  // sensor area (an average of their irradiances weighed by area, bounded by the largest, also at
+  // a fold). Only those cells, so that traceGridCorners' grids give the same values.
+  auto valid = [&](size_t k) {
+    return rays.r_rel[k] <= 1.0f && rays.u[k] * rays.u[k] + rays.v[k] * rays.v[k] <= 1.0f;
+  };
+  thread_local std::vector<float> irradiance;
+  irradiance.assign(count, 0.0f);
+  {
+    thread_local std::vector<double> area_sum;
+    thread_local std::vector<int> cells;
+    area_sum.assign(count, 0.0);
+    cells.assign(count, 0);
+    for (int j = 0; j + 1 < n; ++j)
+      for (int i = 0; i + 1 < n; ++i) {
+        const size_t g00 = static_cast<size_t>(j * n + i), g10 = g00 + 1;
+        const size_t g01 = g00 + static_cast<size_t>(n), g11 = g01 + 1;
+        const size_t f = first_ray;
+        if (!rays.alive[f + g00] || !rays.alive[f + g10] || !rays.alive[f + g01] || !rays.alive[f + g11])
+          continue;
+        if (!valid(f + g00) && !valid(f + g10) && !valid(f + g01) && !valid(f + g11)) continue;
+        // A quad's area from its diagonals, pixels².
+        const double area = 0.5 * std::abs((static_cast<double>(pixel_x[g11]) - pixel_x[g00]) *
+                                               (static_cast<double>(pixel_y[g01]) - pixel_y[g10]) -
+                                           (static_cast<double>(pixel_y[g11]) - pixel_y[g00]) *
+                                               (static_cast<double>(pixel_x[g01]) - pixel_x[g10]));
+        for (size_t g : {g00, g10, g01, g11}) {
+          area_sum[g] += area;
+          ++cells[g];
+        }
+      }
+    const double pitch2 = mapping.pixel_pitch_mm * mapping.pixel_pitch_mm;
+    for (size_t g = 0; g < count; ++g)
+      if (cells[g] > 0 && area_sum[g] > 1e-12)
+        irradiance[g] = static_cast<float>(cells[g] * cell_flux / (area_sum[g] * pitch2));
+  }
   auto vertex = [&](int i, int j) {
     const size_t g = static_cast<size_t>(j * n + i);
     const size_t k = first_ray + g;
     return RasterVertex{pixel_x[g], pixel_y[g], rays.u[k], rays.v[k], rays.r_rel[k],
-                        rays.transmission[k]};
-  };
-  auto valid = [&](size_t k) {
-    return rays.r_rel[k] <= 1.0f && rays.u[k] * rays.u[k] + rays.v[k] * rays.v[k] <= 1.0f;
+                        rays.transmission[k], irradiance[g]};
   };
   // Orientation of each quad's two triangles on the sensor (+1, −1, 0 = mixed or degenerate):
   // where the pupil-to-sensor map folds (a caustic), linear interpolation across the fold is
@@ -189,7 +235,20 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
     }
     return false;
   };
+  // Interpolated corner values do not carry each cell's flux exactly (the flat values do): the
+  // smooth triangles' irradiance is scaled so that together they carry their cells' flux.
+  thread_local std::vector<size_t> smooth_triangles;
+  smooth_triangles.clear();
+  double cells_flux = 0, interpolated_flux = 0;
+  auto keep = [&](const RasterTriangle& t, double smooth) {
+    out->push_back(t);
+    if (smooth <= 0) return;
+    smooth_triangles.push_back(out->size() - 1);
+    cells_flux += 0.5 * cell_flux / (mapping.pixel_pitch_mm * mapping.pixel_pitch_mm);
+    interpolated_flux += smooth;
+  };
   RasterTriangle t;
+  double smooth = 0;
   for (int j = 0; j + 1 < n; ++j)
     for (int i = 0; i + 1 < n; ++i) {
       const size_t k00 = first_ray + static_cast<size_t>(j * n + i), k10 = k00 + 1;
@@ -226,8 +285,8 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
         int m = 0;
         for (int r : ring)
           if (r != dead) tri[m++] = v[r];
-        if (makeTriangle(tri[0], tri[1], tri[2], mapping, aperture, cell_flux, weight, batch, &t))
-          out->push_back(t);
+        if (makeTriangle(tri[0], tri[1], tri[2], mapping, aperture, cell_flux, weight, batch, &t, &smooth))
+          keep(t, smooth);
         continue;
       }
       const RasterVertex v00 = vertex(i, j), v10 = vertex(i + 1, j);
@@ -236,9 +295,18 @@ void buildTriangles(const TracedRays& rays, const SensorMapping& mapping, const 
                    std::min({v00.y, v10.y, v01.y, v11.y}), std::max({v00.y, v10.y, v01.y, v11.y}),
                    mapping))
         continue;  // both triangles would be
-      if (makeTriangle(v00, v10, v11, mapping, aperture, cell_flux, weight, batch, &t)) out->push_back(t);
-      if (makeTriangle(v00, v11, v01, mapping, aperture, cell_flux, weight, batch, &t)) out->push_back(t);
+      if (makeTriangle(v00, v10, v11, mapping, aperture, cell_flux, weight, batch, &t, &smooth)) keep(t, smooth);
+      if (makeTriangle(v00, v11, v01, mapping, aperture, cell_flux, weight, batch, &t, &smooth)) keep(t, smooth);
     }
+  if (interpolated_flux > 0) {
+    const float scale = static_cast<float>(cells_flux / interpolated_flux);
+    for (size_t k : smooth_triangles) {
+      RasterTriangle& s = (*out)[k];
+      s.t0 *= scale;
+      s.tx *= scale;
+      s.ty *= scale;
+    }
+  }
 }
 
 }  // namespace flarekit::render
