@@ -147,9 +147,9 @@ void registerSweep(CLI::App& app) {
     fit::CandidateSummary found;
     const auto candidates = fit::findGhostCandidates(stack, sweep, traces, options.candidates, &found);
     writeImage8(o->out, fit::sweepPicture(sweep, traces, candidates));
-    logInfo(std::to_string(traces.size()) + " border traces, " + std::to_string(candidates.size()) +
-            " ghosts (" + std::to_string(found.pairs) + " from two borders, " + std::to_string(found.single) +
-            " from one); written to " + o->out);
+    logInfo(std::to_string(traces.size()) + " traces, " + std::to_string(candidates.size()) + " ghosts (" +
+            std::to_string(found.pairs) + " from two borders, " + std::to_string(found.single) + " from one, " +
+            std::to_string(found.peaks) + " from a peak); written to " + o->out);
   });
 }
 

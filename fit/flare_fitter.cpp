@@ -36,8 +36,9 @@ std::string FitSummary::BriefReport() const {
   if (optical_zero.measured)
     s << ", optical zero at θ = " << std::setprecision(3) << optical_zero.angle_zero_deg << "°, x = "
       << std::setprecision(2) << optical_zero.axis_x_px << " px (" << optical_zero.ghosts_used << " ghosts)";
-  s << ". " << traces << " border traces: " << candidates.pairs << " ghosts from two borders, "
-    << candidates.single << " from one, " << candidates.traces_unused << " traces inside ghosts. "
+  s << ". " << traces << " traces: " << candidates.pairs << " ghosts from two borders, "
+    << candidates.single << " from one, " << candidates.peaks << " from a peak, " << candidates.traces_unused
+    << " traces inside ghosts. "
     << frame_fit.ghost_fits << " ghost fits in " << frame_fit.frames << " frames";
   if (model_fit.refine_frames > 0)
     s << "; the model refined on " << model_fit.refine_frames << " frames in " << model_fit.refine_iterations
@@ -65,6 +66,7 @@ nlohmann::json FitSummary::toJson() const {
   j["traces"] = traces;
   j["candidates"] = {{"pairs", candidates.pairs},
                      {"single", candidates.single},
+                     {"peaks", candidates.peaks},
                      {"traces_unused", candidates.traces_unused}};
   j["frame_fit"] = {{"frames", frame_fit.frames},
                     {"ghost_fits", frame_fit.ghost_fits},

@@ -303,6 +303,107 @@ std::optional<BorderModel> fitBorderModel(const SweepImage& s, const ZeroOfPairs
   return m;
 }
 
+// The ghost centred on a peak trace, over the trace's frames and on while the peak is hidden
+// (beyond the frame, in the light's zone): at each, its half-width and half-height where S − light
+// (the frame's profile through the peak, vertically) falls halfway from the peak to the lowest
+// level within kReachPx, its outline value that half level and its inside the peak's, falling off
+// over the whole half-width inside and out; where hidden, as at the nearest frame that shows it.
+GhostCandidate peakCandidate(const FrameStack& stack, const SweepImage& s, const std::vector<cv::Mat>& lums,
+                             const BorderTrace& t, const CandidateOptions& o) {
+  constexpr int kReachPx = 60;
+  GhostCandidate c;
+  c.peak_trace = t.id;
+  c.first_row = t.firstRow();
+  c.last_row = t.lastRow();
+  auto hidden = [&](int row) {
+    const double x = borderAt(t, s, row, row)[0];
+    return x < 0 || x > s.width() || s.inLightZone(row, x);
+  };
+  for (int k = 0; k < o.max_hidden_rows && c.first_row > 0 && hidden(c.first_row - 1); ++k) --c.first_row;
+  for (int k = 0; k < o.max_hidden_rows && c.last_row + 1 < s.rows() && hidden(c.last_row + 1); ++k) ++c.last_row;
+  const int n = c.last_row - c.first_row + 1;
+  c.left_seen.assign(n, false);
+  c.right_seen.assign(n, false);
+  std::vector<double> angles(s.angles_deg.begin() + c.first_row, s.angles_deg.begin() + c.last_row + 1);
+  const std::vector<double> x = borderAt(t, s, c.first_row, c.last_row);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> half(n, nan), height(n, nan), peak(n, nan), floor(n, nan);
+  for (int i = 0; i < n; ++i) {
+    const int row = c.first_row + i;
+    const BorderPoint* p = t.at(row);
+    const double mx = p ? p->x_px : x[i];
+    if (!(mx >= 0 && mx < s.width())) continue;
+    const int x0 = static_cast<int>(mx);
+    auto value = [&](int xi) { return cleanAt(s, row, xi); };
+    double low = value(x0);
+    for (int d = 1; d <= kReachPx; ++d)
+      for (int xi : {x0 - d, x0 + d})
+        if (xi >= 0 && xi < s.width() && s.valid.at<uchar>(row, xi)) low = std::min(low, value(xi));
+    const double top = value(x0), level = 0.5 * (top + low);
+    std::vector<double> reach;
+    for (int dir : {-1, 1})
+      for (int d = 1; d <= kReachPx; ++d) {
+        const int xi = x0 + dir * d;
+        if (xi < 0 || xi >= s.width()) break;
+        if (value(xi) <= level) {
+          reach.push_back(d);
+          break;
+        }
+      }
+    if (reach.empty() || !(top > low)) continue;
+    half[i] = median(reach);
+    peak[i] = top;
+    floor[i] = low;
+    const std::vector<double> profile =
+        verticalProfile(lums[row], stack.frames[row].valid, mx, s.horizon_y_px, o.profile_half_columns);
+    for (size_t k = 1; k < profile.size(); ++k)
+      if (std::isfinite(profile[k]) && profile[k] - s.light.at<float>(row, x0) <= level) {
+        height[i] = static_cast<double>(k);
+        break;
+      }
+  }
+  half = smoothed(angles, half);
+  height = smoothed(angles, height);
+  // Where hidden, the nearest measured frame's values.
+  std::vector<int> measured;
+  for (int i = 0; i < n; ++i)
+    if (std::isfinite(peak[i])) measured.push_back(i);
+  for (int i = 0; i < n && !measured.empty(); ++i) {
+    const int j = std::clamp(i, measured.front(), measured.back());
+    if (j == i) continue;
+    half[i] = half[j];
+    height[i] = height[j];
+    peak[i] = peak[j];
+    floor[i] = floor[j];
+  }
+  c.seeds.resize(n);
+  std::vector<double> steps;
+  for (int i = 0; i < n; ++i) {
+    model::GhostParameters& p = c.seeds[i];
+    const BorderPoint* q = t.at(c.first_row + i);
+    const double a = std::isfinite(half[i]) ? std::max(half[i], 1.0) : 1.0;
+    p.channels = stack.channels;
+    p.center_x = q ? q->x_px : x[i];
+    p.center_y = s.horizon_y_px;
+    p.left = p.right = a;
+    p.height = std::isfinite(height[i]) && height[i] > 0.5 ? height[i] : a;
+    p.curvature_left = p.curvature_right = model::kEllipseCurvature;
+    const double rise = std::isfinite(peak[i]) ? peak[i] - floor[i] : 0;
+    for (int ch = 0; ch < stack.channels; ++ch) {
+      p.border[ch] = 0.5 * rise;
+      p.inside[ch] = rise;
+    }
+    if (rise > 0) steps.push_back(0.5 * rise);
+    p.inside_falloff = a;
+    p.inside_exponent = 1;
+    p.outside_falloff = a;
+    p.outside_exponent = 1;
+    p = model::clampToBounds(p);
+  }
+  c.step = steps.empty() ? 0 : median(steps);
+  return c;
+}
+
 }  // namespace
 
 bool CandidateOptions::IsValid(std::string* error) const {
@@ -323,6 +424,7 @@ bool CandidateOptions::IsValid(std::string* error) const {
   if (!(min_height_fraction > 0 && min_height_fraction < 1))
     return fail("candidates: min_height_fraction must be in (0, 1)");
   if (!(seed_outside_falloff_px > 0)) return fail("candidates: seed_outside_falloff_px must be > 0");
+  if (!(rim_px >= 0)) return fail("candidates: rim_px must be ≥ 0");
   return true;
 }
 
@@ -379,7 +481,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
   std::sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return a.score < b.score; });
   std::vector<bool> used(traces.size(), false);
   struct Borders {
-    int left = -1, right = -1;
+    int left = -1, right = -1, peak = -1;
   };
   std::vector<Borders> ghosts;
   for (const auto& p : pairs) {
@@ -387,9 +489,55 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
     used[p.left] = used[p.right] = true;
     ghosts.push_back({p.left, p.right});
   }
+  // Peaks. One running along a border (most of its points within rim_px) is the ghost's bright
+  // rim. One at a pair's middle (in most of the frames that show all three) is the same ghost as
+  // the pair, and the one seen in more frames describes it: the pair (its borders seen together),
+  // or the peak, whose flanks the pair then was (a ghost whose light gathers to a point has no
+  // border of its own, and its flanks are traced only here and there).
+  std::vector<int> peaks;
+  for (const auto& t : traces) {
+    if (t.side != BorderSide::kPeak) continue;
+    bool part = light_edge[t.id] || t.significance < o.single_significance;
+    for (const auto& b : traces) {
+      if (part) break;
+      if (b.side == BorderSide::kPeak) continue;
+      int beside = 0;
+      for (const auto& p : t.points)
+        if (const BorderPoint* q = b.at(p.row); q && std::abs(q->x_px - p.x_px) <= o.rim_px) ++beside;
+      part = 2 * beside > static_cast<int>(t.points.size());
+    }
+    for (auto& g : ghosts) {
+      if (part || g.left < 0) continue;
+      const BorderTrace& l = traces[g.left];
+      const BorderTrace& r = traces[g.right];
+      int both = 0, all = 0, middle = 0;
+      for (const auto& p : l.points) {
+        const BorderPoint* q = r.at(p.row);
+        if (!q) continue;
+        ++both;
+        if (const BorderPoint* m = t.at(p.row)) {
+          ++all;
+          middle += std::abs(m->x_px - 0.5 * (p.x_px + q->x_px)) < 0.25 * (q->x_px - p.x_px);
+        }
+      }
+      if (all == 0 || 2 * middle <= all) continue;
+      if (static_cast<int>(t.points.size()) > both)
+        g = {-1, -1, -1};  // the pair was the peak's flanks
+      else
+        part = true;
+    }
+    if (!part) peaks.push_back(t.id);
+  }
+  std::erase_if(ghosts, [](const Borders& g) { return g.left < 0; });
   CandidateSummary sum;
   sum.pairs = static_cast<int>(ghosts.size());
+  for (int p : peaks) ghosts.push_back({-1, -1, p});
+  sum.peaks = static_cast<int>(peaks.size());
   for (const auto& t : traces) {
+    if (t.side == BorderSide::kPeak) {
+      if (std::find(peaks.begin(), peaks.end(), t.id) == peaks.end()) ++sum.traces_unused;
+      continue;
+    }
     if (used[t.id]) continue;
     if (!light_edge[t.id] && t.significance >= o.single_significance && raisedToHidden(s, t, o.single_raised_fraction)) {
       ghosts.push_back(t.side == BorderSide::kLeft ? Borders{t.id, -1} : Borders{-1, t.id});
@@ -409,6 +557,11 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
     const BorderTrace* r = ghosts[g].right >= 0 ? &traces[ghosts[g].right] : nullptr;
     GhostCandidate& c = out[g];
     c.id = static_cast<int>(g);
+    if (ghosts[g].peak >= 0) {
+      c = peakCandidate(stack, s, lums, traces[ghosts[g].peak], o);
+      c.id = static_cast<int>(g);
+      return;
+    }
     c.left_trace = l ? l->id : -1;
     c.right_trace = r ? r->id : -1;
     c.first_row = std::min(l ? l->firstRow() : s.rows(), r ? r->firstRow() : s.rows());
@@ -533,8 +686,16 @@ std::vector<CentreSamples> centreSamples(const std::vector<GhostCandidate>& cand
                                          const SweepImage& s) {
   std::vector<CentreSamples> out;
   for (const auto& c : candidates) {
-    if (c.left_trace < 0 || c.right_trace < 0) continue;
     CentreSamples cs;
+    if (c.peak_trace >= 0) {
+      for (const auto& p : traces[c.peak_trace].points) {
+        cs.angles_deg.push_back(s.angles_deg[p.row]);
+        cs.centre_x_px.push_back(p.x_px);
+      }
+      out.push_back(std::move(cs));
+      continue;
+    }
+    if (c.left_trace < 0 || c.right_trace < 0) continue;
     for (const auto& p : traces[c.left_trace].points)
       if (const BorderPoint* q = traces[c.right_trace].at(p.row)) {
         cs.angles_deg.push_back(s.angles_deg[p.row]);

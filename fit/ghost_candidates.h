@@ -15,6 +15,10 @@
 // own image (its glow, a starburst spike), never a ghost's: only a ghost focused on the sensor
 // moves with the light, and it is drawn on the light's core.
 //
+// A peak of S (sweep.h) is a ghost of its own, centred on it, unless it is the middle of a paired
+// ghost or runs along a border (a bright rim just inside it): a ghost too small for the sweep
+// to resolve its borders, or one whose light gathers to a point with no sharp border.
+//
 // A trace left over is a ghost whose other border is hidden (beyond the frame, or in the light's
 // zone) when S stays raised by its step from the trace to there on the ghost's side (a large ghost
 // at some angles, a ghost about the light); otherwise it is an edge inside a ghost (a caustic's
@@ -50,6 +54,7 @@ struct CandidateOptions {
   int profile_half_columns = 2;     // columns averaged on each side of Mx for h (≥ 0)
   double min_height_fraction = 0.3; // h is searched within [this, 1/this] × the half-width
   double seed_outside_falloff_px = 2;  // Fo of the seeds, pixels (> 0)
+  double rim_px = 4;                // a peak this close to a border, most of its frames, is a rim
 
   bool IsValid(std::string* error) const;
 };
@@ -57,6 +62,7 @@ struct CandidateOptions {
 struct GhostCandidate {
   int id = 0;
   int left_trace = -1, right_trace = -1;  // BorderTrace ids; −1 where that border is never seen
+  int peak_trace = -1;                    // the BorderSide::kPeak trace it is centred on, or −1
   int first_row = 0, last_row = 0;        // sweep rows (the stack's frames) it is present in
   std::vector<model::GhostParameters> seeds;  // one per row first_row..last_row
   std::vector<bool> left_seen, right_seen;    // per row: the sweep traced that border there, in the frame
@@ -71,7 +77,8 @@ struct GhostCandidate {
 struct CandidateSummary {
   int pairs = 0;          // ghosts with both borders seen
   int single = 0;         // ghosts from one border
-  int traces_unused = 0;  // traces that are neither (inner edges)
+  int peaks = 0;          // ghosts from a peak
+  int traces_unused = 0;  // traces that are none of these (inner edges, rims, a pair's middle)
 };
 
 // The ghosts of the capture from its traces. `stack` gives the frames for the vertical profiles,
@@ -81,7 +88,8 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
                                                 const CandidateOptions& options = {},
                                                 CandidateSummary* summary = nullptr);
 
-// Each candidate's centre samples where both its borders are seen: for measureOpticalZero.
+// Each candidate's centre samples where both its borders are seen, or its peak: for
+// measureOpticalZero.
 std::vector<CentreSamples> centreSamples(const std::vector<GhostCandidate>& candidates,
                                          const std::vector<BorderTrace>& traces,
                                          const SweepImage& sweep);

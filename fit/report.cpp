@@ -287,9 +287,9 @@ cv::Mat sweepPicture(const SweepImage& sweep, const std::vector<BorderTrace>& tr
     return logView(tall, lo, hi);
   };
   cv::Mat left = panel(sweep.radiance);
-  const cv::Scalar rising(0, 165, 255), falling(255, 200, 0), light(0, 255, 255);
+  const cv::Scalar rising(0, 165, 255), falling(255, 200, 0), peak(80, 220, 80), light(0, 255, 255);
   for (const auto& t : traces) {
-    const cv::Scalar colour = t.side == BorderSide::kLeft ? rising : falling;
+    const cv::Scalar colour = t.side == BorderSide::kLeft ? rising : t.side == BorderSide::kRight ? falling : peak;
     for (size_t k = 1; k < t.points.size(); ++k)
       cv::line(left, {int(t.points[k - 1].x_px), t.points[k - 1].row * kRowPx + 1},
                {int(t.points[k].x_px), t.points[k].row * kRowPx + 1}, colour, 1, cv::LINE_AA);
@@ -298,7 +298,7 @@ cv::Mat sweepPicture(const SweepImage& sweep, const std::vector<BorderTrace>& tr
     if (std::isfinite(sweep.light_x_px[i]))
       cv::circle(left, {int(sweep.light_x_px[i]), i * kRowPx + 1}, 1, light, cv::FILLED);
   for (const auto& c : candidates) {
-    const int id = c.left_trace >= 0 ? c.left_trace : c.right_trace;
+    const int id = c.left_trace >= 0 ? c.left_trace : c.right_trace >= 0 ? c.right_trace : c.peak_trace;
     const BorderTrace& t = traces[id];
     const BorderPoint& p = t.points[t.points.size() / 2];
     cv::putText(left, std::to_string(c.id), {int(p.x_px) + 3, p.row * kRowPx + 4}, cv::FONT_HERSHEY_SIMPLEX,
@@ -338,6 +338,7 @@ void writeFitReport(const fs::path& dir, const FitResult& result, const FrameSta
     ghosts.push_back({{"id", c.id},
                       {"left_trace", c.left_trace},
                       {"right_trace", c.right_trace},
+                      {"peak_trace", c.peak_trace},
                       {"angle_min_deg", stack.frames[result.frames_used[c.first_row]].angle_deg},
                       {"angle_max_deg", stack.frames[result.frames_used[c.last_row]].angle_deg},
                       {"frames_fitted", frames}});

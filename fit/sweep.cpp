@@ -111,6 +111,20 @@ cv::Mat gaussianDerivative(double sigma) {
   return k;
 }
 
+// The second derivative of a Gaussian of σ as a row kernel.
+cv::Mat gaussianSecondDerivative(double sigma) {
+  const int r = static_cast<int>(std::ceil(4 * sigma));
+  cv::Mat k(1, 2 * r + 1, CV_64F);
+  for (int i = -r; i <= r; ++i)
+    k.at<double>(0, i + r) = (i * i / (sigma * sigma) - 1) / (sigma * sigma) * std::exp(-0.5 * i * i / (sigma * sigma));
+  // No response to a constant or a line: zero sum (the even kernel has no first moment).
+  k -= cv::mean(k)[0];
+  // Unit response to x²/2.
+  double second = 0;
+  for (int i = -r; i <= r; ++i) second += 0.5 * i * i * k.at<double>(0, i + r);
+  return k / second;
+}
+
 // The median of each row over ±half points (fewer at the ends): the slope under the borders,
 // without the side lobes a wider derivative would put beside every strong border.
 cv::Mat runningMedian(const cv::Mat& m, int half) {
@@ -279,6 +293,8 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
   cv::Mat derivative = filterRows(log_s, gaussianDerivative(options.edge_sigma_px));
   s.edge = (derivative - runningMedian(derivative, static_cast<int>(std::ceil(2 * options.trend_sigma_px))))
                .mul(scale);
+  s.slope = derivative;
+  s.peak = -filterRows(log_s, gaussianSecondDerivative(options.edge_sigma_px)).mul(scale);
 
   // Masked: within reach of an invalid point (the light's clipped core) or the frame's edge, and
   // the light's zone.
@@ -305,6 +321,15 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
     if (spread > 0) s.edge /= spread;
   }
   s.edge.setTo(0, s.valid == 0);
+  magnitudes.clear();
+  for (int i = 0; i < rows; ++i)
+    for (int x = 0; x < w; ++x)
+      if (s.valid.at<uchar>(i, x)) magnitudes.push_back(std::abs(s.peak.at<float>(i, x)));
+  if (!magnitudes.empty()) {
+    const double spread = 1.4826 * quantile(magnitudes, 0.5);
+    if (spread > 0) s.peak /= spread;
+  }
+  s.peak.setTo(0, s.valid == 0);
   return s;
 }
 
@@ -342,8 +367,22 @@ void predict(const BorderTrace& t, int row, const SweepOptions& o, double* x, do
   *gate = (n < 3 ? 2 * o.gate_px : o.gate_px) + 0.5 * (gap - 1);
 }
 
-std::vector<BorderPoint> rowPeaks(const SweepImage& s, int row, int sign, double level) {
+// The points of one row: extrema of the border response beyond `level` (σ) for a border, or
+// where the slope falls through 0 with a curvature beyond `level` for a peak.
+std::vector<BorderPoint> rowPoints(const SweepImage& s, int row, BorderSide side, double level) {
   std::vector<BorderPoint> peaks;
+  if (side == BorderSide::kPeak) {
+    const float* d = s.slope.ptr<float>(row);
+    const float* c = s.peak.ptr<float>(row);
+    const uchar* ok = s.valid.ptr<uchar>(row);
+    for (int x = 0; x + 1 < s.width(); ++x) {
+      if (!ok[x] || !ok[x + 1] || !(d[x] >= 0 && d[x + 1] < 0)) continue;
+      const double strength = std::max(c[x], c[x + 1]);
+      if (strength > level) peaks.push_back({row, x + 0.5 + d[x] / (d[x] - d[x + 1]), strength, 0});
+    }
+    return peaks;
+  }
+  const int sign = side == BorderSide::kLeft ? 1 : -1;
   const float* e = s.edge.ptr<float>(row);
   const uchar* ok = s.valid.ptr<uchar>(row);
   for (int x = 1; x + 1 < s.width(); ++x) {
@@ -359,6 +398,10 @@ std::vector<BorderPoint> rowPeaks(const SweepImage& s, int row, int sign, double
 
 // S − light just inside the border minus just outside it, over 2–5 px on either side.
 double jumpAt(const SweepImage& s, int row, double x, BorderSide side) {
+  if (side == BorderSide::kPeak) {
+    const int xi = std::clamp(static_cast<int>(std::floor(x)), 0, s.width() - 1);
+    return s.radiance.at<float>(row, xi) - s.light.at<float>(row, xi);
+  }
   double inside = 0, outside = 0;
   int ni = 0, no = 0;
   const int direction = side == BorderSide::kLeft ? 1 : -1;
@@ -475,11 +518,10 @@ std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) 
   std::string error;
   if (!o.IsValid(&error)) throw std::invalid_argument(error);
   std::vector<BorderTrace> done;
-  for (BorderSide side : {BorderSide::kLeft, BorderSide::kRight}) {
-    const int sign = side == BorderSide::kLeft ? 1 : -1;
+  for (BorderSide side : {BorderSide::kLeft, BorderSide::kRight, BorderSide::kPeak}) {
     std::vector<Growing> active;
     for (int row = 0; row < s.rows(); ++row) {
-      const std::vector<BorderPoint> peaks = rowPeaks(s, row, sign, o.peak_sigma);
+      const std::vector<BorderPoint> peaks = rowPoints(s, row, side, o.peak_sigma);
       struct Candidate {
         double cost;
         int trace, peak;

@@ -16,7 +16,9 @@
 // Borders are edges along x: the derivative of Gaussian of log S less its running median over
 // ±2 trend_sigma_px (the smooth slope under the borders, which is no border), in σ of its noise
 // (from a shot + read noise model measured on the mirrored rows' differences). A left
-// border rises, a right border falls. Trace points are the local extrema beyond peak_sigma; they
+// border rises, a right border falls. Peaks are where that derivative (without the trend taken
+// out) falls through 0, as strong as the curvature there in σ: a peak is no border, so the
+// borders' rising and falling flanks need not be resolved to find it. Trace points are the local extrema beyond peak_sigma; they
 // are linked over θ by their predicted position (a line through the trace's last points), split
 // where their slope kinks (the linking passed onto a crossing border), the light's fringes (which
 // keep their distance from it) left out, and the pieces of one border that the light or a
@@ -61,6 +63,8 @@ struct SweepImage {
   cv::Mat valid;                   // CV_8U: 255 where the edge response means something
   cv::Mat noise;                   // CV_32F: noise σ of `radiance` at each point
   cv::Mat edge;                    // CV_32F: border response of log(radiance − light), in σ
+  cv::Mat slope;                   // CV_32F: derivative of Gaussian of log(radiance − light), per px
+  cv::Mat peak;                    // CV_32F: its curvature (negative second derivative), in σ
   std::vector<double> light_x_px;  // the light's centre per row (NaN outside the frame)
   double light_zone_left_px = 0;   // the light's zone reaches this far to its left and right
   double light_zone_right_px = 0;
@@ -78,13 +82,16 @@ struct SweepImage {
 enum class BorderSide {
   kLeft,   // rising along x: the ghost lies to its right
   kRight,  // falling along x: the ghost lies to its left
+  kPeak,   // S peaks along x there: a ghost too narrow for its borders to be told apart, or a
+           // ghost whose light gathers to a point (near focus) with no sharp border of its own
 };
 
 struct BorderPoint {
   int row = 0;          // frame index in the sweep
   double x_px = 0;      // sub-pixel position of the extremum
   double strength = 0;  // |edge response|, noise σ
-  double jump = 0;      // S just inside minus just outside the border (linear, > 0 for a ghost)
+  double jump = 0;      // S just inside minus just outside the border (linear, > 0 for a ghost);
+                        // at a peak, S − light there
 };
 
 struct BorderTrace {

@@ -126,5 +126,32 @@ TEST(GhostCandidates, AGhostWithOneBorderInTheFrameGetsTheOtherFromItsBorderMode
   EXPECT_GE(matched_frames, 0.9 * sweep.rows());
 }
 
+// A ghost whose light gathers to a point, its outline at the noise (a near-focused ghost's
+// glow): no border to pair, but one candidate centred on its peak, in the frames that show it.
+TEST(GhostCandidates, AGhostWhoseLightGathersToAPointIsFoundAtItsPeak) {
+  PanScene scene;
+  scene.ghosts = {{1.6, 30, 0.02, 0.01}, {-0.8, 40, 1e-4, 0.03, 1, 1}};
+  const FrameStack stack = scene.stack(anglesFrom(0, 6, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  CandidateSummary summary;
+  const std::vector<GhostCandidate> candidates = findGhostCandidates(stack, sweep, findTraces(sweep), {}, &summary);
+  EXPECT_EQ(summary.peaks, 1);
+  int frames = 0, centred = 0;
+  for (int row = 0; row < sweep.rows(); ++row) {
+    const auto p = scene.ghostAt(1, sweep.angles_deg[row]);
+    if (p.center_x < 8 || p.center_x > stack.size.width - 8 ||
+        std::abs(p.center_x - scene.lightX(sweep.angles_deg[row])) < 10)
+      continue;
+    ++frames;
+    for (const auto& c : candidates)
+      if (c.peak_trace >= 0 && c.present(row) && std::abs(c.seed(row).center_x - p.center_x) < 1) {
+        ++centred;
+        break;
+      }
+  }
+  EXPECT_GE(centred, 0.9 * frames) << "of " << frames << " frames";
+}
+
 }  // namespace
 }  // namespace flarekit::fit

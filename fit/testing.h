@@ -53,6 +53,7 @@ struct PanScene {
   struct Ghost {
     double rate = 1, radius_px = 20, border = 0.01, inside = 0.005;
     double height_ratio = 1;  // its half-height over its half-width
+    double falloff_ratio = 0.4;  // its inside fall-off Fi over its half-width
   };
   std::vector<Ghost> ghosts = {{1.6, 30, 0.02, 0.01}, {-0.8, 45, 0.01, 0.015}};
   double noise = 1e-4;
@@ -68,7 +69,7 @@ struct PanScene {
     p.height = ghosts[g].height_ratio * ghosts[g].radius_px;
     p.border = {ghosts[g].border, 0, 0};
     p.inside = {ghosts[g].inside, 0, 0};
-    p.inside_falloff = 0.4 * ghosts[g].radius_px;
+    p.inside_falloff = ghosts[g].falloff_ratio * ghosts[g].radius_px;
     p.outside_falloff = 1.5;
     return p;
   }
