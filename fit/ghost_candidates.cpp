@@ -54,9 +54,11 @@ double hiddenFrom(const SweepImage& s, int row, double x, BorderSide side) {
   return left ? s.width() : 0.0;
 }
 
-// Whether S stays raised by `fraction` of the trace's step from the trace to where the ghost's
-// other border could lie unseen (hiddenFrom), in most of the trace's frames.
-bool raisedToHidden(const SweepImage& s, const BorderTrace& t, double fraction) {
+// Whether S stays raised from the trace to where the ghost's other border could lie unseen
+// (hiddenFrom), in most of the trace's frames: above the outside by more than its noise
+// (noise_sigma σ, typically), and nowhere by less than `fraction` of the border's step, or of the
+// stretch's typical rise where that is less: a bright rim just inside the border inflates the step.
+bool raisedToHidden(const SweepImage& s, const BorderTrace& t, double fraction, double noise_sigma) {
   int raised = 0, tested = 0;
   for (const auto& p : t.points) {
     if (!(p.jump > 0)) continue;
@@ -72,8 +74,10 @@ bool raisedToHidden(const SweepImage& s, const BorderTrace& t, double fraction) 
     if (inside.size() < 4 || !std::isfinite(outside)) continue;
     ++tested;
     // A low quantile: the whole stretch, not a part of it, must be raised.
-    std::nth_element(inside.begin(), inside.begin() + inside.size() / 5, inside.end());
-    if (inside[inside.size() / 5] >= fraction * p.jump) ++raised;
+    std::sort(inside.begin(), inside.end());
+    const double typical = inside[inside.size() / 2], low = inside[inside.size() / 5];
+    const double sigma = s.noise.at<float>(p.row, std::clamp(static_cast<int>(p.x_px), 0, s.width() - 1));
+    if (typical > noise_sigma * sigma && low >= fraction * std::min(p.jump, typical)) ++raised;
   }
   return tested > 0 && 2 * raised > tested;
 }
@@ -425,6 +429,7 @@ bool CandidateOptions::IsValid(std::string* error) const {
     return fail("candidates: min_height_fraction must be in (0, 1)");
   if (!(seed_outside_falloff_px > 0)) return fail("candidates: seed_outside_falloff_px must be > 0");
   if (!(rim_px >= 0)) return fail("candidates: rim_px must be ≥ 0");
+  if (!(single_raised_sigma >= 0)) return fail("candidates: single_raised_sigma must be ≥ 0");
   return true;
 }
 
@@ -539,7 +544,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       continue;
     }
     if (used[t.id]) continue;
-    if (!light_edge[t.id] && t.significance >= o.single_significance && raisedToHidden(s, t, o.single_raised_fraction)) {
+    if (!light_edge[t.id] && t.significance >= o.single_significance && raisedToHidden(s, t, o.single_raised_fraction, o.single_raised_sigma)) {
       ghosts.push_back(t.side == BorderSide::kLeft ? Borders{t.id, -1} : Borders{-1, t.id});
       ++sum.single;
     } else {

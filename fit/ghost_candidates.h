@@ -20,9 +20,9 @@
 // to resolve its borders, or one whose light gathers to a point with no sharp border.
 //
 // A trace left over is a ghost whose other border is hidden (beyond the frame, or in the light's
-// zone) when S stays raised by its step from the trace to there on the ghost's side (a large ghost
-// at some angles, a ghost about the light); otherwise it is an edge inside a ghost (a caustic's
-// rim or fold) and no ghost of its own.
+// zone) when S stays raised from the trace to there on the ghost's side, all the way (a large
+// ghost at some angles, a ghost about the light); otherwise it is an edge inside a ghost (a
+// caustic's rim or fold) and no ghost of its own.
 //
 // Each ghost gets its angle range (its traces' frames, and on while its borders are hidden in the
 // light's zone or beyond the frame) and, at every frame in it, a seed: Mx, L,
@@ -49,7 +49,9 @@ struct CandidateOptions {
   double min_motion_from_light = 0.05;  // a border moves, relative to the light, at least this
                                         // fraction of the light's own motion (≥ 0)
   double single_significance = 20;  // a lone trace's significance to stand for a ghost (> 0)
-  double single_raised_fraction = 0.5;  // S stays this fraction of its step above the outside
+  double single_raised_sigma = 3;   // S stays raised above the outside by this many noise σ (≥ 0)
+  double single_raised_fraction = 0.5;  // and nowhere by less than this fraction of its step (or
+                                        // of its typical rise, where a rim makes that the less)
   int max_hidden_rows = 30;         // a ghost goes on this many frames beyond its traces when hidden
   int profile_half_columns = 2;     // columns averaged on each side of Mx for h (≥ 0)
   double min_height_fraction = 0.3; // h is searched within [this, 1/this] × the half-width
