@@ -310,11 +310,11 @@ std::optional<BorderModel> fitBorderModel(const SweepImage& s, const ZeroOfPairs
 // The ghost centred on a peak trace, over the trace's frames and on while the peak is hidden
 // (beyond the frame, in the light's zone): at each, its half-width and half-height where S − light
 // (the frame's profile through the peak, vertically) falls halfway from the peak to the lowest
-// level within kReachPx, its outline value that half level and its inside the peak's, falling off
+// level within peak_reach_px, its outline value that half level and its inside the peak's, falling off
 // over the whole half-width inside and out; where hidden, as at the nearest frame that shows it.
 GhostCandidate peakCandidate(const FrameStack& stack, const SweepImage& s, const std::vector<cv::Mat>& lums,
                              const BorderTrace& t, const CandidateOptions& o) {
-  constexpr int kReachPx = 60;
+  const int reach = o.peak_reach_px;
   GhostCandidate c;
   c.peak_trace = t.id;
   c.first_row = t.firstRow();
@@ -340,22 +340,22 @@ GhostCandidate peakCandidate(const FrameStack& stack, const SweepImage& s, const
     const int x0 = static_cast<int>(mx);
     auto value = [&](int xi) { return cleanAt(s, row, xi); };
     double low = value(x0);
-    for (int d = 1; d <= kReachPx; ++d)
+    for (int d = 1; d <= reach; ++d)
       for (int xi : {x0 - d, x0 + d})
         if (xi >= 0 && xi < s.width() && s.valid.at<uchar>(row, xi)) low = std::min(low, value(xi));
     const double top = value(x0), level = 0.5 * (top + low);
-    std::vector<double> reach;
+    std::vector<double> halfway;  // the distances to the half level on either side
     for (int dir : {-1, 1})
-      for (int d = 1; d <= kReachPx; ++d) {
+      for (int d = 1; d <= reach; ++d) {
         const int xi = x0 + dir * d;
         if (xi < 0 || xi >= s.width()) break;
         if (value(xi) <= level) {
-          reach.push_back(d);
+          halfway.push_back(d);
           break;
         }
       }
-    if (reach.empty() || !(top > low)) continue;
-    half[i] = median(reach);
+    if (halfway.empty() || !(top > low)) continue;
+    half[i] = median(halfway);
     peak[i] = top;
     floor[i] = low;
     const std::vector<double> profile =
@@ -429,6 +429,7 @@ bool CandidateOptions::IsValid(std::string* error) const {
     return fail("candidates: min_height_fraction must be in (0, 1)");
   if (!(seed_outside_falloff_px > 0)) return fail("candidates: seed_outside_falloff_px must be > 0");
   if (!(rim_px >= 0)) return fail("candidates: rim_px must be ≥ 0");
+  if (peak_reach_px < 1) return fail("candidates: peak_reach_px must be ≥ 1");
   if (!(single_raised_sigma >= 0)) return fail("candidates: single_raised_sigma must be ≥ 0");
   return true;
 }

@@ -57,6 +57,7 @@ struct CandidateOptions {
   double min_height_fraction = 0.3; // h is searched within [this, 1/this] × the half-width
   double seed_outside_falloff_px = 2;  // Fo of the seeds, pixels (> 0)
   double rim_px = 4;                // a peak this close to a border, most of its frames, is a rim
+  int peak_reach_px = 60;           // a peak's half level is looked for within this distance (≥ 1)
 
   bool IsValid(std::string* error) const;
 };

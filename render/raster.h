@@ -2,9 +2,11 @@
 // Ghost rasterization (Hullin 2011 §3.2; Bodonyi & Kunkli 2023 §4). Each cell of a traced ray
 // grid is a quad on the sensor, split into two triangles along a fixed diagonal. A pixel centre
 // inside a triangle (top-left fill rule, so shared edges count once) receives
-//   irradiance = T · (pupil area of the triangle / its sensor area) · A(u, v) · C(r_rel)
-// with T, (u, v) and r_rel interpolated linearly over the triangle, A the aperture (antialiased
-// over one pixel footprint) and C = clamp(0.5 + (1 − r_rel)/footprint) the rim vignetting.
+//   irradiance = T · E · A(u, v) · C(r_rel)
+// with T·E, (u, v) and r_rel interpolated linearly over the triangle, A the aperture (antialiased
+// over one pixel footprint) and C = clamp(0.5 + (1 − r_rel)/footprint) the rim vignetting. E is
+// the ray grid's irradiance (pupil area / sensor area of its cells), Gouraud-shaded: at each ray
+// that of the cells beside it (Hullin 2011 §5), so a ghost's light does not step at cell edges.
 // Triangles smaller than a pixel (caustics, distant ghosts) are splatted instead: their flux goes
 // to the pixels under points spread over them, so none is lost between pixel centres.
 // Both rasterizers below call the same per-pixel function, so they give the same image up to
@@ -28,10 +30,11 @@ struct RasterTriangle {
   bool top_left[3];                // edges that own their pixel centres on ties
   float u0, ux, uy, v0, vx, vy;    // aperture coordinates: u = u0 + ux (x−ox) + uy (y−oy)
   float r0, rx, ry;                // r_rel
-  float t0, tx, ty;                // transmission
+  float t0, tx, ty;                // transmission × irradiance (transmission alone: flat, below)
   float aperture_footprint;        // aperture units spanned by one pixel
   float rim_footprint;             // r_rel units spanned by one pixel
-  cv::Vec3f weight;                // colour weight × E_in × pupil area / sensor area
+  cv::Vec3f weight;                // colour weight; × E_in × pupil area / sensor area when flat
+                                   // (splatted, or beside no cell showing the ghost)
   // Every point lies inside the aperture and the rims by at least half a pixel footprint
   // (the distance functions are concave, so checking the corners suffices): A = C = 1.
   bool interior;

@@ -13,7 +13,7 @@ namespace {
 
 struct RasterVertex {
   float x, y, u, v, r, t;
-  float e;  // irradiance at the ray (vertexIrradiance), 0 where no whole cell is beside it
+  float e;  // irradiance at the ray (see buildTriangles), 0 where no cell beside it shows the ghost
 };
 
 // Whether points spanning [min_x, max_x] × [min_y, max_y] (pixel coordinates) lie wholly off
@@ -125,8 +125,8 @@ bool makeTriangle(RasterVertex p0, RasterVertex p1, RasterVertex p2, const Senso
   // Irradiance from the area ratio of the ray-grid cells (Hullin 2011 §3.2), Gouraud-shaded
   // (their §5, "smooth shading"): each corner's irradiance, interpolated with T, so that a ghost's
   // light varies continuously over the grid's cells, as a real ghost's does, instead of stepping
-  // at every cell's edge. A splatted triangle (a caustic's) and one with a corner beside no whole
-  // cell carry their own half cell's flux over their area instead, which conserves it exactly.
+  // at every cell's edge. A splatted triangle (a caustic's) and one with a corner beside no
+  // cell showing the ghost carry their own half cell's flux over their area instead.
   if (!t.splat && p0.e > 0 && p1.e > 0 && p2.e > 0) {
     plane(p0.t * p0.e, p1.t * p1.e, p2.t * p2.e, &t.t0, &t.tx, &t.ty);
     t.weight = weight;
