@@ -18,6 +18,7 @@ void registerModelCommands(CLI::App& app);        // app/model_commands.cpp
 void registerFitCommands(CLI::App& app);          // app/fit_commands.cpp
 void registerPredictCommands(CLI::App& app);      // app/predict_commands.cpp
 void registerViewCommands(CLI::App& app);         // app/view_commands.cpp
+void registerDatasetCommands(CLI::App& app);      // app/dataset_commands.cpp
 void registerDemoCommand(CLI::App& app);          // app/demo_command.cpp
 
 // The "bench" subcommand that layers add their benchmarks to ("flarekit bench render ...").

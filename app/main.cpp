@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   app::registerFitCommands(app);
   app::registerPredictCommands(app);
   app::registerViewCommands(app);
+  app::registerDatasetCommands(app);
   app::registerDemoCommand(app);
 
   try {

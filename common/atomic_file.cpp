@@ -82,7 +82,9 @@ void createFolder(const fs::path& folder) {
 }
 
 void writeFileAtomically(const fs::path& path,
-                         const std::function<void(const fs::path& temporary)>& write) {
+                         const std::function<void(const fs::path& temporary)>& write,
+                         Durability durability) {
+  const bool flush = durability == Durability::kFlushed;
   checkWritable(path);
   const fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
   fs::path temporary = temporaryNameFor(path.parent_path().empty() ? fs::path(".") / path : path);
@@ -90,7 +92,7 @@ void writeFileAtomically(const fs::path& path,
     write(temporary);
     if (std::error_code ec; !fs::exists(temporary, ec))
       throw RuntimeError("writing " + path.string() + " produced no file");
-    syncPath(temporary, false);
+    if (flush) syncPath(temporary, false);
     if (::rename(temporary.c_str(), path.c_str()) != 0)
       throw RuntimeError("cannot rename " + temporary.string() + " to " + path.string() + ": " +
                          errnoText());
@@ -99,7 +101,17 @@ void writeFileAtomically(const fs::path& path,
     fs::remove(temporary, ec);
     throw;
   }
-  syncPath(folder, true);
+  if (flush) syncPath(folder, true);
+}
+
+void syncFileSystem(const fs::path& folder) {
+  const int fd = ::open(folder.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd < 0) throw RuntimeError("cannot open " + folder.string() + " to flush it: " + errnoText());
+  const int rc = ::syncfs(fd);
+  const int saved = errno;
+  ::close(fd);
+  if (rc != 0)
+    throw RuntimeError("cannot flush the files in " + folder.string() + " to disk: " + std::strerror(saved));
 }
 
 void writeTextFileAtomically(const fs::path& path, std::string_view content) {

@@ -356,6 +356,10 @@ bool ExrWriteOptions::IsValid(std::string* error) const {
     if (error) *error = "pixel_type must be float or half";
     return false;
   }
+  if (zip_level < 0 || zip_level > 9) {
+    if (error) *error = "zip_level must be 0 (the default) or 1 to 9";
+    return false;
+  }
   return true;
 }
 
@@ -381,6 +385,7 @@ void writeExr(const fs::path& path, const ExrImage& image, const ExrWriteOptions
 
   Imf::Header header(size.width, size.height);
   header.compression() = options.compress ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
+  if (options.zip_level > 0) header.zipCompressionLevel() = options.zip_level;
   for (const auto& [name, value] : image.attributes) insertAttribute(header, name, value);
 
   const bool half = options.pixel_type == ExrPixelType::kHalf;
@@ -422,7 +427,7 @@ void writeExr(const fs::path& path, const ExrImage& image, const ExrWriteOptions
       throw RuntimeError("cannot write " + path.string() + ": " + e.what() +
                          " (check free disk space and permissions)");
     }
-  });
+  }, options.durability);
 }
 
 void writeExr(const fs::path& path, const cv::Mat& image, const ExrAttributes& attributes,

@@ -20,6 +20,8 @@
 #include <nlohmann/json_fwd.hpp>
 #include <opencv2/core.hpp>
 
+#include "common/atomic_file.h"
+
 namespace flarekit {
 
 using ExrAttribute = std::variant<int, float, double, std::string, std::vector<float>,
@@ -54,6 +56,10 @@ struct ExrWriteOptions {
   ExrPixelType pixel_type = ExrPixelType::kFloat;
   // Zip compression (lossless); false writes uncompressed scan lines.
   bool compress = true;
+  // zlib's level for it, 1 (fastest) to 9 (smallest); 0 = OpenEXR's default.
+  int zip_level = 0;
+  // When the file reaches the disk (common/atomic_file.h); kFlushed: before writeExr returns.
+  Durability durability = Durability::kFlushed;
 
   bool IsValid(std::string* error) const;
 };

@@ -367,6 +367,13 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
 
   const double inv_scale = 1.0 / view.scale;
   const bool identity = view.isIdentity();
+  // view.modelFromImage with the roll's cosine and sine taken once (the same arithmetic, so the
+  // same points to the bit): it runs for every pixel.
+  const double roll_cos = std::cos(view.roll_rad), roll_sin = std::sin(view.roll_rad);
+  auto modelFromImage = [&](cv::Point2d p) {
+    const double x = (p.x - view.image_center.x) / view.scale, y = (p.y - view.image_center.y) / view.scale;
+    return cv::Point2d(view.model_center.x + roll_cos * x - roll_sin * y, view.model_center.y + roll_sin * x + roll_cos * y);
+  };
   const SignedDistanceOptions& dopt = options.distance;
   const int block = options.block_size;
 
@@ -425,7 +432,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
           detail::Candidate centre_nearest;
           bool has_centre_nearest = false;
           if (bw * bh > 1) {
-            const cv::Point2d qc = identity ? centre : view.modelFromImage(centre);
+            const cv::Point2d qc = identity ? centre : modelFromImage(centre);
             reach = 0.5 * std::sqrt(double(bw * bw + bh * bh)) * inv_scale;
             detail::Candidate unused;
             bool has_unused = false;
@@ -521,7 +528,7 @@ void renderInto(std::span<const GhostParameters> ghosts, cv::Rect roi, cv::Mat& 
                 addInside();
                 continue;
               }
-              const cv::Point2d q = identity ? p : view.modelFromImage(p);
+              const cv::Point2d q = identity ? p : modelFromImage(p);
               PointEval e;
               bool exact = false;  // e.d is the exact distance (no cutoff)
               detail::Candidate start = hint;

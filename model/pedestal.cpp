@@ -1,6 +1,7 @@
 #include "model/pedestal.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace flarekit::model {
@@ -43,13 +44,23 @@ void Pedestal::addTo(cv::Mat& image, cv::Size capture_size, const ViewTransform&
   if (empty()) return;
   if (image.type() != CV_32FC(channels))
     throw std::invalid_argument("pedestal: image type does not match its channels");
+  // at(view.modelFromImage(pixel centre), c) for every pixel and channel, in the same arithmetic
+  // (so to the bit), with the view's cosine and sine and each pixel's terms computed once.
+  const double cs = std::cos(view.roll_rad), sn = std::sin(view.roll_rad);
+  const double w = capture_size.width, h = capture_size.height;
   for (int y = 0; y < image.rows; ++y) {
     float* row = image.ptr<float>(y);
+    const double my = (y + 0.5 - view.image_center.y) / view.scale;
     for (int x = 0; x < image.cols; ++x) {
-      const cv::Point2d p = view.modelFromImage({x + 0.5, y + 0.5});
+      const double mx = (x + 0.5 - view.image_center.x) / view.scale;
+      const cv::Point2d q(std::clamp(view.model_center.x + cs * mx - sn * my, 0.0, w),
+                          std::clamp(view.model_center.y + sn * mx + cs * my, 0.0, h));
+      const auto t = pedestalTerms(q, capture_size);
       for (int c = 0; c < channels; ++c) {
+        double value = 0;
+        for (int k = 0; k < kPedestalTerms; ++k) value += coefficients[c * kPedestalTerms + k] * t[k];
         float& v = row[x * channels + c];
-        v = std::max(0.0f, v + static_cast<float>(at(p, capture_size, c)));
+        v = std::max(0.0f, v + static_cast<float>(value));
       }
     }
   }

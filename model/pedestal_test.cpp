@@ -68,5 +68,24 @@ TEST(Pedestal, IsDrawnThroughTheViewAsGhostsAre) {
   EXPECT_THROW(rgb.addTo(wrong, kCapture), std::invalid_argument);
 }
 
+TEST(Pedestal, AddsExactlyItsValueAtEachPixelsModelPoint) {
+  // addTo is at(view.modelFromImage(pixel centre)) added at every pixel, to the bit, under any view.
+  const Pedestal rgb{3, {0.1, 0.2, -0.3, 0.4, 0.5, -0.6, 0.2, -0.1, 0.3, 0.1, -0.2, 0.3, 0.05, 0.3, 0.2, -0.4, 0.1, 0.2}};
+  ViewTransform view;
+  view.roll_rad = 0.7;
+  view.scale = 1.37;
+  view.image_center = {120.3, 71.9};
+  view.model_center = {96.2, 48.7};
+  cv::Mat image(cv::Size(240, 150), CV_32FC3, cv::Scalar::all(0.25));
+  rgb.addTo(image, kCapture, view);
+  for (int y = 0; y < image.rows; y += 7)
+    for (int x = 0; x < image.cols; x += 5) {
+      const cv::Point2d q = view.modelFromImage({x + 0.5, y + 0.5});
+      for (int c = 0; c < 3; ++c)
+        ASSERT_EQ(image.at<cv::Vec3f>(y, x)[c], std::max(0.0f, 0.25f + static_cast<float>(rgb.at(q, kCapture, c))))
+            << x << "," << y << " channel " << c;
+    }
+}
+
 }  // namespace
 }  // namespace flarekit::model
