@@ -7,6 +7,8 @@
 #include "common/config.h"
 #include "common/error.h"
 #include "common/log.h"
+#include "common/image.h"
+#include "dataset/contact_sheet.h"
 #include "dataset/export_benchmark.h"
 #include "dataset/flare_export.h"
 
@@ -50,7 +52,8 @@ void registerExportFlares(CLI::App& app) {
   struct Options {
     SetOptions set;
     dataset::ExportOptions exports;
-    std::string out, shard = "1/1";
+    std::string out, shard = "1/1", sheet;
+    dataset::ContactSheetOptions sheet_options;
     bool json = false;
   };
   auto o = std::make_shared<Options>();
@@ -61,11 +64,16 @@ void registerExportFlares(CLI::App& app) {
   cmd->add_option("--count", o->exports.count, "Samples in the whole set")->required();
   cmd->add_option("--out", o->out, "Output folder (shards of one set share it)")->required();
   cmd->add_option("--shard", o->shard, "Write only part K of N of the set, K/N (default 1/1: all of it)");
+  cmd->add_option("--sheet", o->sheet, "Also write a PNG contact sheet of this run's first samples");
+  cmd->add_option("--sheet-samples", o->sheet_options.samples, "Samples on the sheet (default 6)");
   cmd->add_flag("--json", o->json, "Print the summary as one JSON object");
   cmd->callback([o] {
     o->exports.shard = dataset::parseShard(o->shard);
+    std::string why;
+    if (!o->sheet.empty() && !o->sheet_options.IsValid(&why)) throw InputError("--sheet-samples: " + why);
     const auto models = loadModels(o->set, o->exports);
     const dataset::ExportSummary s = dataset::exportFlares(models, o->exports, o->out);
+    if (!o->sheet.empty()) writeImage8(o->sheet, dataset::contactSheet(o->out, s.jsonl, o->sheet_options));
     if (o->json)
       std::cout << jsonText(dataset::toJson(s)) << "\n";
     else

@@ -54,6 +54,7 @@ ExportBenchmarkResult runExportBenchmark(const std::vector<ExportModel>& models,
   r.bytes = s.bytes;
   r.seconds = s.seconds;
   r.samples_per_s = s.samples_per_s;
+  r.cpu_ms_per_sample = s.samples ? 1e3 * r.cpu_s / s.samples : 0;
   r.ms_render_per_sample = s.samples ? 1e3 * s.cpu_render_s / s.samples : 0;
   r.ms_write_per_sample = s.samples ? 1e3 * s.cpu_write_s / s.samples : 0;
   r.folder = folder;
@@ -69,7 +70,8 @@ std::string ExportBenchmarkResult::BriefReport() const {
   s.precision(3);
   s << samples << " samples at " << width << "x" << height << " on " << threads << " threads: " << samples_per_s
     << " images/s (" << seconds << " s; per sample " << ms_render_per_sample << " ms rendering, "
-    << ms_write_per_sample << " ms writing " << (samples ? files / samples : 0) << " files; CPU " << cpu_s << " s)";
+    << ms_write_per_sample << " ms writing " << (samples ? files / samples : 0) << " files; CPU " << cpu_ms_per_sample
+    << " ms per sample)";
   return s.str();
 }
 
@@ -85,6 +87,7 @@ nlohmann::json toJson(const ExportBenchmarkResult& r) {
           {"seconds", r.seconds},
           {"samples_per_s", r.samples_per_s},
           {"cpu_s", r.cpu_s},
+          {"cpu_ms_per_sample", r.cpu_ms_per_sample},
           {"ms_render_per_sample", r.ms_render_per_sample},
           {"ms_write_per_sample", r.ms_write_per_sample},
           {"folder", r.folder.string()}};

@@ -30,6 +30,9 @@ struct ExportBenchmarkResult {
   double seconds = 0;                // wall-clock time of the export (models loaded before)
   double samples_per_s = 0;          // the figure of the target ("images per second")
   double cpu_s = 0;                  // CPU time of the whole process during the export
+  // cpu_s per sample: on N idle cores the export approaches N · 1000 / cpu_ms_per_sample samples
+  // per second, whatever else loaded the machine while it was measured.
+  double cpu_ms_per_sample = 0;
   double ms_render_per_sample = 0;   // CPU time per sample: rendering and encoding in memory
   double ms_write_per_sample = 0;    // CPU time per sample: compressing and writing its files
   std::filesystem::path folder;      // where the set was written (removed unless kept)
