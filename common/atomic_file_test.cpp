@@ -135,6 +135,29 @@ TEST(AtomicFile, KilledAtRandomMomentsNeverLeavesAPartialFile) {
   }
 }
 
+TEST(AtomicFile, DeferredWritesAreWholeOrNothingToo) {
+  TempDir dir;
+  auto write = [&](const std::string& text) {
+    writeFileAtomically(
+        dir / "a.txt", [&](const fs::path& t) { std::ofstream(t) << text; }, Durability::kDeferred);
+  };
+  write("one");
+  write("two");
+  EXPECT_EQ(slurp(dir / "a.txt"), "two");
+  EXPECT_THROW(writeFileAtomically(
+                   dir / "a.txt",
+                   [](const fs::path& t) {
+                     std::ofstream(t) << "half";
+                     throw RuntimeError("writer failed");
+                   },
+                   Durability::kDeferred),
+               RuntimeError);
+  EXPECT_EQ(slurp(dir / "a.txt"), "two");
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir.path()), fs::directory_iterator()), 1);
+  EXPECT_NO_THROW(syncFileSystem(dir.path()));
+  EXPECT_THROW(syncFileSystem(dir / "missing"), RuntimeError);
+}
+
 TEST(AtomicFile, KilledExrWriterLeavesReadableOldFile) {
   TempDir dir;
   cv::Mat old(64, 64, CV_32F, cv::Scalar(1.0f));

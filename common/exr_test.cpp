@@ -298,5 +298,24 @@ TEST(Exr, DefaultOptionsAreValid) {
   EXPECT_TRUE(ExrWriteOptions{}.IsValid(&why)) << why;
 }
 
+TEST(Exr, ZipLevelChangesTheSizeNotThePixels) {
+  TempDir dir;
+  cv::Mat image(96, 128, CV_32FC3);  // repeating patterns, where zlib's levels differ
+  for (int y = 0; y < image.rows; ++y)
+    for (int x = 0; x < image.cols; ++x)
+      image.at<cv::Vec3f>(y, x) = cv::Vec3f(0.01f * (x % 17), 0.1f * (y % 5), 0.001f * ((x * y) % 251));
+  ExrWriteOptions fast, small;
+  fast.zip_level = 1;
+  small.zip_level = 9;
+  writeExr(dir / "fast.exr", image, {}, fast);
+  writeExr(dir / "small.exr", image, {}, small);
+  EXPECT_EQ(cv::norm(readExrLayer(dir / "fast.exr", ""), image, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(readExrLayer(dir / "small.exr", ""), image, cv::NORM_INF), 0.0);
+  EXPECT_GT(std::filesystem::file_size(dir / "fast.exr"), std::filesystem::file_size(dir / "small.exr"));
+  ExrWriteOptions bad;
+  bad.zip_level = 10;
+  EXPECT_FALSE(bad.IsValid(nullptr));
+}
+
 }  // namespace
 }  // namespace flarekit
