@@ -21,9 +21,7 @@
 #include "common/config.h"
 #include "common/error.h"
 #include "common/exr.h"
-#include "common/image.h"
 #include "common/input_file.h"
-#include "common/log.h"
 #include "common/progress.h"
 #include "model/model_renderer.h"
 
