@@ -427,28 +427,20 @@ SampleImages renderSample(const ExportModel& em, const SampleParameters& s, cons
     long long pixels = 0;
     const cv::Rect bounds = model::ghostPixelBounds(g.parameters, view) & frame;
     if (bounds.area() > 0) {
-      cv::Mat box(bounds.size(), CV_8UC1, cv::Scalar(0));
       // Rendered over the whole frame (the same tiles and blocks as FlareModel::render) into a
       // blank image, then added: the sum is bit for bit what render() adds ghost by ghost.
       model::addGhosts(std::span<const model::GhostParameters>(&g.parameters, 1), frame, scratch, ro, view);
-      for (int y = bounds.y; y < bounds.y + bounds.height; ++y) {
-        float* src = scratch.ptr<float>(y) + static_cast<size_t>(bounds.x) * channels;
-        float* dst = sum.ptr<float>(y) + static_cast<size_t>(bounds.x) * channels;
-        std::uint8_t* mk = box.ptr<std::uint8_t>(y - bounds.y);
-        for (int x = 0; x < bounds.width; ++x) {
-          float peak = 0;
-          for (int c = 0; c < channels; ++c) {
-            const float v = src[x * channels + c];
-            dst[x * channels + c] += v;
-            peak = std::max(peak, v);
-            src[x * channels + c] = 0;
-          }
-          if (peak >= threshold) {
-            mk[x] = 255;
-            ++pixels;
-          }
-        }
+      cv::Mat alone = scratch(bounds), into = sum(bounds);
+      cv::add(into, alone, into);
+      cv::Mat peak = alone;
+      if (channels == 3) {
+        cv::Mat planes[3];
+        cv::split(alone, planes);
+        peak = cv::max(cv::max(planes[0], planes[1]), planes[2]);
       }
+      const cv::Mat box = peak >= threshold;  // 255 where set
+      pixels = cv::countNonZero(box);
+      alone.setTo(cv::Scalar::all(0));
       if (pixels > 0) {
         mask = cv::Mat(size, CV_8UC1, cv::Scalar(0));
         box.copyTo(mask(bounds));
