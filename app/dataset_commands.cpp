@@ -28,7 +28,8 @@ void addSetOptions(CLI::App* cmd, SetOptions& s, dataset::ExportOptions& o) {
       ->required();
   cmd->add_option("--size", s.size, "Image size W×H (or WxH), pixels (default 512x512)");
   cmd->add_option("--seed", o.seed, "Seed of the whole set: sample i depends on (seed, i) only (default 1)");
-  cmd->add_option("--ev-min", s.ev_min, "Lowest exposure, stops above the model's white level (default -1)");
+  cmd->add_option("--ev-min", s.ev_min,
+                  "Lowest exposure, stops; at EV 0 the model's white (its capture's clip level) is 1.0 (default -1)");
   cmd->add_option("--ev-max", s.ev_max, "Highest exposure, stops (default 3)");
   cmd->add_option("--mask-threshold", s.mask_threshold,
                   "A ghost's mask covers where its exposed value reaches this fraction of white (default 1/256)");

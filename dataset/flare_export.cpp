@@ -290,7 +290,7 @@ cv::Size parseSize(std::string_view text) {
 }
 
 SampleRange shardRange(long long count, Shard shard) {
-  // count ≤ 1e12 and N ≤ 1e6: the products fit in 64 bits.
+  // count ≤ 1e9 (ExportOptions) and K ≤ N ≤ 1e6: the products fit in 64 bits.
   return {count * (shard.index - 1) / shard.count, count * shard.index / shard.count};
 }
 
