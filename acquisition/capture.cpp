@@ -18,6 +18,7 @@
 #include "common/atomic_file.h"
 #include "common/config.h"
 #include "common/folder_lock.h"
+#include "common/light_spot.h"
 #include "common/log.h"
 #include "common/progress.h"
 
@@ -51,6 +52,18 @@ bool CapturePlan::IsValid(std::string* error) const {
   if (!(f_number > 0)) return fail("f_number must be positive");
   if (max_retries < 0) return fail("max_retries must be ≥ 0");
   if (!(retry_delay_s >= 0)) return fail("retry_delay_s must be ≥ 0");
+  if (!(settle_s >= 0 && settle_s <= 60)) return fail("settle_s must be in [0, 60] seconds");
+  if (light_exposures_s.size() > 8) return fail("at most 8 light exposures");
+  for (size_t i = 0; i < light_exposures_s.size(); ++i) {
+    if (!(light_exposures_s[i] > 0 && light_exposures_s[i] <= 60))
+      return fail("light exposures must be in (0, 60] seconds");
+    for (size_t j = 0; j < i; ++j)
+      if (light_exposures_s[j] == light_exposures_s[i]) return fail("light exposures must differ");
+  }
+  if (!(light_nd_factor >= 1 && light_nd_factor <= 1e12))
+    return fail("the light exposure's ND factor must be in [1, 1e12]");
+  if (light_nd_factor != 1 && light_exposures_s.empty())
+    return fail("an ND factor declares the light exposure's filter: it needs a light exposure");
   return true;
 }
 
@@ -78,6 +91,9 @@ CapturePlan CapturePlan::FromRig(const Rig& rig) {
   p.f_number = rig.capture.f_number;
   p.max_retries = rig.capture.max_retries;
   p.retry_delay_s = rig.capture.retry_delay_s;
+  p.settle_s = rig.settle.settle_s;
+  p.light_exposures_s = rig.capture.light_exposures_s;
+  p.light_nd_factor = rig.capture.light_nd_factor;
   return p;
 }
 
@@ -154,6 +170,14 @@ class Session {
   [[noreturn]] void failPersistently(const std::string& what, int index, const DeviceError& e);
   void captureDarks();
   void captureFrame(int index, double angle_deg);
+  void settle() const;
+  // The simulated light's drift at plan position `index` (−1: the end-of-capture check).
+  void applyLightDrift(int index);
+  // Takes the light exposure at the head's angle and writes it to `file`: its manifest entry.
+  Json takeLightExposure(int index, double angle_deg, const std::string& file);
+  // The end-of-capture light check and the light's stability.
+  void checkLight();
+  void updateLightStability();
 
   const Rig& rig_;
   RigDevices& dev_;
@@ -185,10 +209,13 @@ Json Session::newManifest() const {
   // What a fit of the rig's imperfections is measured against; absent = an ideal rig.
   const SimulationConfig& sim = rig_.simulation;
   if (rig_.camera_driver == CameraDriver::kSimulated &&
-      (sim.optical_axis_offset_px != cv::Point2d(0, 0) || sim.angle_zero_offset_deg != 0.0))
+      (sim.optical_axis_offset_px != cv::Point2d(0, 0) || sim.angle_zero_offset_deg != 0.0 ||
+       sim.light_drift_pct != 0.0)) {
     m["rig"]["simulation"] = {
         {"optical_axis_offset_px", {sim.optical_axis_offset_px.x, sim.optical_axis_offset_px.y}},
         {"angle_zero_offset_deg", sim.angle_zero_offset_deg}};
+    if (sim.light_drift_pct != 0.0) m["rig"]["simulation"]["light_drift_pct"] = sim.light_drift_pct;
+  }
   m["lens"] = {{"name", lens_name_},
                {"file", rig_.camera_driver == CameraDriver::kSimulated
                             ? rig_.simulation.lens.string()
@@ -227,6 +254,14 @@ Json Session::newManifest() const {
                {"step_deg", plan_.step_deg}, {"angles_deg", angles_},
                {"exposures_s", plan_.exposures_s}, {"dark_frames", plan_.dark_frames},
                {"keep_raw", plan_.keep_raw}};
+  // Recorded only when used, so that captures without them keep their manifests.
+  if (plan_.settle_s > 0) m["plan"]["settle_s"] = plan_.settle_s;
+  if (!plan_.light_exposures_s.empty()) {
+    m["plan"]["light_exposures_s"] = plan_.light_exposures_s;
+    m["plan"]["light_nd_factor"] = plan_.light_nd_factor;
+    m["light_stability"] = {{"frames", 0}, {"reference_frame_index", nullptr},
+                            {"drift_pct", nullptr}, {"scatter_pct", nullptr}};
+  }
   m["truth"] = sim_camera_ != nullptr && options_.write_truth;
   m["frames"] = Json::array();
   m["darks"] = Json::array();
@@ -251,8 +286,12 @@ void Session::checkResume(const ConfigNode& old) const {
   differs("ISO", old["camera"]["iso"].json(), fresh["camera"]["iso"]);
   differs("f-number", old["camera"]["f_number"].json(), fresh["camera"]["f_number"]);
   const auto simulation = old["rig"].find("simulation");
-  differs("rig's simulated axis offset or angle zero", simulation ? simulation->json() : Json(),
-          fresh["rig"].value("simulation", Json()));
+  differs("rig's simulated axis offset, angle zero or light drift",
+          simulation ? simulation->json() : Json(), fresh["rig"].value("simulation", Json()));
+  for (const char* key : {"light_exposures_s", "light_nd_factor", "settle_s"}) {
+    const auto was = old["plan"].find(key);
+    differs(std::string("plan's ") + key, was ? was->json() : Json(), fresh["plan"].value(key, Json()));
+  }
 }
 
 template <class F>
@@ -336,10 +375,85 @@ void Session::captureDarks() {
   writeManifest();
 }
 
+void Session::settle() const {
+  if (plan_.settle_s > 0)
+    std::this_thread::sleep_for(std::chrono::duration<double>(plan_.settle_s));
+}
+
+void Session::applyLightDrift(int index) {
+  if (!sim_camera_ || rig_.simulation.light_drift_pct == 0.0) return;
+  const int n = static_cast<int>(angles_.size());
+  const double progress = index < 0 ? 1.0 : n > 1 ? static_cast<double>(index) / (n - 1) : 0.0;
+  sim_camera_->setLightScale(1.0 + rig_.simulation.light_drift_pct / 100.0 * progress);
+}
+
+Json Session::takeLightExposure(int index, double angle_deg, const std::string& file) {
+  const double nd = plan_.light_nd_factor;
+  std::vector<RawFrame> raws;
+  for (double t : plan_.light_exposures_s) {
+    raws.push_back(retry("capturing the " + std::to_string(t) + " s light exposure", true, index, [&] {
+      dev_.camera->setExposure(t);
+      if (!sim_camera_) return dev_.camera->capture();
+      // The simulated camera sees the light through the declared filter for this exposure only.
+      struct Filter {
+        SimulatedCamera* c;
+        ~Filter() { c->setLightExposure(false); }
+      } filter{sim_camera_};
+      sim_camera_->setLightExposure(true, nd);
+      return dev_.camera->capture();
+    }));
+    ++summary_.exposures_taken;
+  }
+  // Merged as the frames are (demosaiced alike), then times what the filter took.
+  MergeResult merged = mergeBracket(raws, merge_);
+  FrameMetadata meta;
+  meta.angle_deg = angle_deg;
+  meta.has_angle = true;
+  for (const auto& r : raws) meta.exposures_s.push_back(r.exposure_s);
+  meta.iso = raws[0].iso > 0 ? raws[0].iso : plan_.iso;
+  meta.f_number = raws[0].f_number > 0 ? raws[0].f_number : plan_.f_number;
+  meta.camera = raws[0].camera;
+  meta.lens = lens_name_;
+  meta.rig = rig_.name;
+  meta.pixel_pitch_um = pixel_pitch_um_;
+  meta.focal_length_mm = focal_length_mm_;
+  meta.units = manifest_["image"]["units"].get<std::string>();
+  ExrImage exr = mergedToExr(merged, meta);
+  if (nd != 1.0) exr.layers.front().image *= nd;
+  exr.attributes["flarekit.light_nd_factor"] = nd;
+  exr.attributes["flarekit.light_exposure"] =
+      std::string("the light's own exposures, merged apart from the frames; values times the ND factor");
+  createFolder(out_ / "light");
+  writeExr(out_ / file, exr);
+  const ExrLayer* sat = exr.find("saturated");
+  const LightSpot spot = measureLightSpot(exr.main(), sat ? sat->image : cv::Mat());
+  Json e = {{"file", file},
+            {"exposures_s", meta.exposures_s},
+            {"nd_factor", nd},
+            {"found", spot.found},
+            {"center_px", {spot.center.x, spot.center.y}},
+            {"peak", spot.peak},
+            {"flux", spot.flux},
+            {"flux_radius_px", spot.flux_radius_px},
+            {"cut", spot.cut},
+            {"saturated_photosites", merged.saturated_count}};
+  if (merged.saturated_count > 0) {
+    const std::string w = "frame " + std::to_string(index) + ": the light exposure clipped (" +
+                          std::to_string(merged.saturated_count) +
+                          " photosites): its flux and peak are lower bounds; shorten the "
+                          "shortest light_exposure_s or declare a denser light_nd_factor";
+    logWarning(w);
+    summary_.warnings.push_back(w);
+  }
+  return e;
+}
+
 void Session::captureFrame(int index, double angle_deg) {
   attempts_ = 0;
   retry("moving the head to " + std::to_string(angle_deg) + "°", false, index,
         [&] { dev_.head->moveTo(angle_deg); });
+  settle();
+  applyLightDrift(index);
   std::vector<RawFrame> bracket;
   for (double t : plan_.exposures_s) {
     bracket.push_back(retry("capturing the " + std::to_string(t) + " s exposure", true, index, [&] {
@@ -348,6 +462,9 @@ void Session::captureFrame(int index, double angle_deg) {
     }));
     ++summary_.exposures_taken;
   }
+  const std::string name = frameName(index);
+  Json light;
+  if (!plan_.light_exposures_s.empty()) light = takeLightExposure(index, angle_deg, "light/" + name + ".exr");
   MergeResult merged = mergeBracket(bracket, merge_, darks_);
   for (const auto& w : merged.warnings) {
     logWarning("frame " + std::to_string(index) + ": " + w);
@@ -365,7 +482,6 @@ void Session::captureFrame(int index, double angle_deg) {
   meta.pixel_pitch_um = pixel_pitch_um_;
   meta.focal_length_mm = focal_length_mm_;
   meta.units = manifest_["image"]["units"].get<std::string>();
-  const std::string name = frameName(index);
   Json entry = {{"index", index},
                 {"angle_deg", angle_deg},
                 {"file", "frames/" + name + ".exr"},
@@ -374,6 +490,7 @@ void Session::captureFrame(int index, double angle_deg) {
   Json ratios = Json::array();
   for (const auto& c : merged.ratio_checks) ratios.push_back(c.measured_ratio);
   entry["exposure_ratios"] = ratios;
+  if (!light.is_null()) entry["light"] = light;
 
   if (plan_.keep_raw) {
     createFolder(out_ / "raw");
@@ -406,6 +523,11 @@ void Session::captureFrame(int index, double angle_deg) {
   if (sim_camera_ && options_.write_truth) {
     ExrImage truth = sim_camera_->scene().truth(angle_deg, sim_camera_->fNumber());
     truth.attributes["flarekit.angle_deg"] = angle_deg;
+    // A drifting light: the truth is what the frame saw.
+    if (const double scale = sim_camera_->lightScale(); scale != 1.0) {
+      for (auto& layer : truth.layers) layer.image *= scale;
+      truth.attributes["flarekit.light_scale"] = scale;
+    }
     // Half precision (3 significant digits, far below the frames' noise) keeps truth/ small;
     // float when a value would overflow half (the light's own image of a bright scene).
     double peak = 0;
@@ -437,8 +559,116 @@ void Session::captureFrame(int index, double angle_deg) {
   manifest_["image"]["height"] = bracket[0].data.rows;
   manifest_["frames"].push_back(entry);
   manifest_["frames_done"] = static_cast<int>(manifest_["frames"].size());
+  if (!plan_.light_exposures_s.empty()) updateLightStability();
   writeManifest();
   summary_.saturated_photosites += merged.saturated_count;
+}
+
+void Session::updateLightStability() {
+  // The frames whose light exposure holds the whole light, in plan order.
+  std::vector<double> angles, fluxes;
+  int reference = -1;
+  bool clipped = false;
+  std::vector<Json> frames(manifest_["frames"].begin(), manifest_["frames"].end());
+  std::sort(frames.begin(), frames.end(),
+            [](const Json& a, const Json& b) { return a["index"] < b["index"]; });
+  for (const Json& f : frames) {
+    const Json* l = f.contains("light") ? &f["light"] : nullptr;
+    if (!l) continue;
+    if (l->value("saturated_photosites", 0LL) > 0) clipped = true;
+    if (!l->value("found", false) || l->value("cut", true) || l->value("saturated_photosites", 0LL) > 0)
+      continue;
+    if (reference < 0) reference = f["index"].get<int>();
+    angles.push_back(f["angle_deg"].get<double>());
+    fluxes.push_back((*l)["flux"].get<double>());
+  }
+  Json st = {{"frames", static_cast<int>(fluxes.size())},
+             {"reference_frame_index", reference < 0 ? Json() : Json(reference)},
+             {"drift_pct", nullptr},
+             {"scatter_pct", nullptr}};
+  // Scatter: RMS about a quadratic in the angle (the lens's own fall-off and a slow drift are
+  // smooth in it; flicker is not), in % of the mean.
+  if (fluxes.size() >= 5) {
+    const int n = static_cast<int>(fluxes.size());
+    double a_mean = 0, mean = 0;
+    for (int i = 0; i < n; ++i) {
+      a_mean += angles[i] / n;
+      mean += fluxes[i] / n;
+    }
+    cv::Mat A(n, 3, CV_64F), b(n, 1, CV_64F), x;
+    for (int i = 0; i < n; ++i) {
+      const double u = angles[i] - a_mean;
+      A.at<double>(i, 0) = 1;
+      A.at<double>(i, 1) = u;
+      A.at<double>(i, 2) = u * u;
+      b.at<double>(i) = fluxes[i];
+    }
+    if (cv::solve(A, b, x, cv::DECOMP_SVD) && mean > 0) {
+      const cv::Mat r = A * x - b;
+      st["scatter_pct"] = 100.0 * std::sqrt(r.dot(r) / n) / mean;
+    }
+  }
+  if (manifest_.contains("light_check")) {
+    const Json& c = manifest_["light_check"];
+    for (size_t k = 0; k < frames.size(); ++k)
+      if (frames[k]["index"] == c["frame_index"] && frames[k].contains("light")) {
+        const double f0 = frames[k]["light"]["flux"].get<double>();
+        if (f0 > 0 && c["saturated_photosites"].get<long long>() == 0)
+          st["drift_pct"] = 100.0 * (c["flux"].get<double>() / f0 - 1.0);
+        st["reference_frame_index"] = c["frame_index"];
+      }
+  }
+  std::vector<std::string> problems;
+  if (st["drift_pct"].is_number() && std::abs(st["drift_pct"].get<double>()) > 1.0) {
+    char b[96];
+    std::snprintf(b, sizeof b, "the light drifted %+.2f %% over the capture", st["drift_pct"].get<double>());
+    problems.push_back(b);
+  }
+  if (st["scatter_pct"].is_number() && st["scatter_pct"].get<double>() > 1.0) {
+    char b[96];
+    std::snprintf(b, sizeof b, "the light's flux scatters %.2f %% from frame to frame", st["scatter_pct"].get<double>());
+    problems.push_back(b);
+  }
+  if (clipped) problems.push_back("a light exposure clipped (its flux is a lower bound)");
+  if (!problems.empty()) {
+    std::string w;
+    for (const auto& p : problems) w += (w.empty() ? "" : "; ") + p;
+    st["warning"] = w + " (more than 1 %: figures normalised by the light are less certain)";
+  }
+  manifest_["light_stability"] = st;
+}
+
+void Session::checkLight() {
+  if (plan_.light_exposures_s.empty()) return;
+  updateLightStability();
+  const Json& st = manifest_["light_stability"];
+  if (st["reference_frame_index"].is_null()) {
+    const std::string w = "no frame's light exposure holds the whole light: the light's drift cannot "
+                          "be measured (a sweep that passes the optical axis can)";
+    logWarning(w);
+    summary_.warnings.push_back(w);
+    return;
+  }
+  const int index = st["reference_frame_index"].get<int>();
+  const double angle = angles_[index];
+  attempts_ = 0;
+  retry("moving the head back to " + std::to_string(angle) + "° for the light check", false, index,
+        [&] { dev_.head->moveTo(angle); });
+  settle();
+  applyLightDrift(-1);
+  Json e = takeLightExposure(index, angle, "light/check_end.exr");
+  manifest_["light_check"] = {{"frame_index", index},
+                              {"angle_deg", angle},
+                              {"file", e["file"]},
+                              {"flux", e["flux"]},
+                              {"peak", e["peak"]},
+                              {"saturated_photosites", e["saturated_photosites"]}};
+  updateLightStability();
+  const Json& done = manifest_["light_stability"];
+  if (done.contains("warning")) {
+    logWarning(done["warning"].get<std::string>());
+    summary_.warnings.push_back(done["warning"].get<std::string>());
+  }
 }
 
 CaptureSummary Session::run() {
@@ -549,6 +779,7 @@ CaptureSummary Session::run() {
       if (options_.progress) progress.advance();
     }
   }
+  if (!interrupted) checkLight();
   summary_.termination = interrupted ? "interrupted" : "complete";
   manifest_["status"] = summary_.termination;
   manifest_.erase("error");

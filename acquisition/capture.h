@@ -27,6 +27,14 @@
 //                                  flarekit.true_angle_deg (the angle rendered) when the rig's
 //                                  angle_zero_offset_deg is not 0, and
 //                                  flarekit.optical_axis_offset_px when that is not (0, 0)
+//   DIR/light/frame_NNNN.exr     with light exposures (plan.light_exposures_s): the frame's light
+//                                  exposures merged apart from its bracket (a bracket of their own,
+//                                  the shortest short enough not to clip the light), in the
+//                                  frames' units and channels, times the declared
+//                                  light_nd_factor; float, zip; layer "saturated" as in the
+//                                  frames; attributes as a frame's, and flarekit.light_nd_factor
+//   DIR/light/check_end.exr      the same at the end of the capture, back at the light check's
+//                                  angle (light_check below)
 //   DIR/darks/dark_K.exr         averaged dark frame for exposure K (float DN), --dark-frames
 //   DIR/raw/frame_NNNN_eK.dng    --keep-raw: the RAW exposures; DNG for Bayer sensors (levels and
 //                                  EXIF exposure inside), 16-bit PNG (.png) for mono sensors
@@ -35,8 +43,9 @@
 //   status            "in_progress" | "complete" | "interrupted" (Ctrl-C) | "failed" (+ "error")
 //   rig               {name, file (as given on the command line), head, camera: driver names,
 //                      simulated: bool, simulation?: {optical_axis_offset_px: [dx, dy],
-//                      angle_zero_offset_deg}} (simulation: a simulated camera's imperfections,
-//                      rig file [simulation]; present only when either is not 0)
+//                      angle_zero_offset_deg, light_drift_pct?}} (simulation: a simulated
+//                      camera's imperfections, rig file [simulation]; present only when one is
+//                      not 0; light_drift_pct only when it is not 0)
 //   head              description of the rotation head
 //   lens              {name, file, focal_length_mm}  (name and file "" when the rig does not know
 //                      its lens; focal_length_mm, the simulated lens's paraxial EFL or the real
@@ -49,14 +58,36 @@
 //                      units: "relative irradiance (render units)" for simulated rigs, else
 //                      "electrons/s" (merged value = electrons per second per photosite)
 //   plan              {from_deg, to_deg, step_deg, angles_deg: [...], exposures_s: [...],
-//                      dark_frames, keep_raw}
+//                      dark_frames, keep_raw, settle_s?, light_exposures_s?, light_nd_factor?}
+//                      (settle_s: the pause after each move before exposing, rig [head] settle_s,
+//                      when not 0; light_exposures_s and light_nd_factor: the light exposures,
+//                      rig [capture] light_exposure_s and light_nd_factor, when there are any)
 //   truth             true when truth/ holds ground truth for every frame
 //   frames            [{index, angle_deg, file, truth_file?,
 //                       raw_files?: [{file, exposure_s, black_level_dn, white_level_dn}],
 //                       exposures_s, saturated_photosites,
 //                       exposure_ratios: [measured long/short ratio of consecutive exposures;
 //                                         0 = too few mid-tone photosites to tell],
-//                       retries}] in plan order, one entry per finished frame, never twice
+//                       retries,
+//                       light?: the frame's light exposures (with plan.light_exposures_s):
+//                               {file, exposures_s, nd_factor, found (the light's image is in
+//                               it), center_px: [x, y], peak, flux, flux_radius_px, cut (the flux
+//                               disc leaves the image: flux is partial), saturated_photosites}
+//                               (peak: the brightest pixel; flux: the sum over the disc of
+//                               flux_radius_px = image diagonal / 8 about the light's centre;
+//                               both in the frames' units, common/light_spot.h)
+//                      }] in plan order, one entry per finished frame, never twice
+//   light_check       with light exposures, once the plan is done: the head went back to the
+//                      angle of the first frame whose light was whole (found, not cut, unclipped)
+//                      and took the light exposures again: {frame_index, angle_deg, file, flux,
+//                      peak, saturated_photosites}
+//   light_stability   with light exposures (rewritten after every frame): {frames (whole light
+//                      measurements), reference_frame_index, drift_pct (100·(check flux / that
+//                      frame's flux − 1); null until light_check), scatter_pct (RMS of the
+//                      frames' fluxes about a quadratic in the angle, % of their mean; null below
+//                      5 frames), warning? (either beyond ±1 %, or a light exposure clipped)}.
+//                      The lens passes less light at wider angles, so the drift is measured by
+//                      returning to one angle, not along the sweep (docs/metrics.md)
 //   darks             [{exposure_s, file, frames}] when dark frames were taken
 //   frames_done, frames_planned
 // A frame file is written before the manifest lists it: a frame listed is whole and readable;
@@ -83,6 +114,12 @@ struct CapturePlan {
   double f_number = 8;    // aperture (> 0)
   int max_retries = 3;    // retries of a transiently failing device operation (≥ 0)
   double retry_delay_s = 0.5;  // pause before a retry (≥ 0)
+  double settle_s = 0;    // pause after each move before exposing (rig [head] settle_s; 0–60)
+  // The light exposures: more exposures per frame, merged apart from the frames, the shortest
+  // short enough (or through a declared ND filter) that the light's image does not clip. Empty =
+  // none; each in (0, 60] s, distinct, at most 8.
+  std::vector<double> light_exposures_s;
+  double light_nd_factor = 1;  // the declared filter's attenuation (≥ 1; only with light exposures)
 
   bool IsValid(std::string* error) const;
   // The angles, from from_deg to to_deg in steps of step_deg.

@@ -110,6 +110,93 @@ TEST(Capture, WritesFramesTruthAndManifest) {
   EXPECT_EQ(again.frames_already_done, 5);
 }
 
+// Light exposures: merged apart into light/, measured in the manifest; after the last frame the
+// first whole light is measured again, and a drifting simulated light is reported as such.
+TEST(Capture, LightExposuresMeasureTheLightAndItsDrift) {
+  testing::TempDir dir;
+  Rig rig = testRig();
+  rig.simulation.light_drift_pct = 2;
+  RigDevices d = devices(rig);
+  CapturePlan plan = smallPlan(4, 0.5);
+  plan.light_exposures_s = {3.0};
+  plan.settle_s = 0.01;
+  const CaptureSummary s = runCapture(rig, d, plan, dir.path() / "cap");
+  expectEveryAngleOnce(dir.path() / "cap", plan);
+  EXPECT_EQ(s.exposures_taken, 9 * 3 + 1);  // the bracket and the light exposure; the light check
+  const auto m = manifest(dir.path() / "cap");
+  EXPECT_EQ(m["plan"]["light_exposures_s"], nlohmann::json({3.0}));
+  EXPECT_EQ(m["plan"]["light_nd_factor"], 1.0);
+  EXPECT_EQ(m["plan"]["settle_s"], 0.01);
+  EXPECT_EQ(m["rig"]["simulation"]["light_drift_pct"], 2.0);
+  for (const auto& f : m["frames"]) {
+    const auto& l = f["light"];
+    EXPECT_TRUE(l["found"].get<bool>());
+    EXPECT_FALSE(l["cut"].get<bool>());
+    EXPECT_EQ(l["saturated_photosites"], 0);
+    EXPECT_TRUE(fs::exists(dir.path() / "cap" / l["file"].get<std::string>()));
+    // The spot (3.0 on a disc of radius 4) about its centre, unclipped, in scene units.
+    EXPECT_NEAR(l["center_px"][0].get<double>(), 16.5 - std::floor(f["angle_deg"].get<double>()), 0.6);
+    EXPECT_NEAR(l["peak"].get<double>(), 3.0 * (1 + 0.02 * f["index"].get<int>() / 8.0), 0.25);
+  }
+  ASSERT_TRUE(m.contains("light_check"));
+  EXPECT_EQ(m["light_check"]["frame_index"], 0);
+  EXPECT_TRUE(fs::exists(dir.path() / "cap" / "light/check_end.exr"));
+  const auto& st = m["light_stability"];
+  EXPECT_EQ(st["frames"], 9);
+  EXPECT_EQ(st["reference_frame_index"], 0);
+  EXPECT_NEAR(st["drift_pct"].get<double>(), 2.0, 0.5);
+  EXPECT_TRUE(st["scatter_pct"].is_number());
+  EXPECT_NE(st["warning"].get<std::string>().find("drifted"), std::string::npos);
+  // The truth is what the frames saw: the drift included.
+  const ExrImage last = readExr(dir.path() / "cap" / m["frames"][8]["truth_file"].get<std::string>());
+  EXPECT_EQ(numericAttribute(last.attributes, "flarekit.light_scale"), 1.02);
+}
+
+// A declared ND filter: the simulated camera sees the light through it, the light exposure's
+// values are multiplied back; a steady light stays within 1 %, without a warning.
+TEST(Capture, NdFilteredLightExposureAndASteadyLight) {
+  testing::TempDir dir;
+  Rig rig = testRig();
+  RigDevices d = devices(rig);
+  CapturePlan plan = smallPlan(4, 0.5);
+  plan.light_exposures_s = {30.0};
+  plan.light_nd_factor = 10;
+  runCapture(rig, d, plan, dir.path() / "cap");
+  const auto m = manifest(dir.path() / "cap");
+  EXPECT_EQ(m["plan"]["light_nd_factor"], 10.0);
+  const cv::Mat light = readExrLayer(dir.path() / "cap" / "light/frame_0000.exr", "");
+  EXPECT_NEAR(light.at<float>(12, 16), 3.0, 0.2);  // 30 s through ×10 = 3 s of the light
+  const auto& st = m["light_stability"];
+  EXPECT_LT(std::abs(st["drift_pct"].get<double>()), 1.0);
+  EXPECT_FALSE(st.contains("warning"));
+  // Without light exposures or settle, the manifest has none of their keys (older captures stay
+  // alike).
+  runCapture(rig, d, smallPlan(2), dir.path() / "plain");
+  const auto p = manifest(dir.path() / "plain");
+  EXPECT_FALSE(p["plan"].contains("light_exposures_s"));
+  EXPECT_FALSE(p["plan"].contains("settle_s"));
+  EXPECT_FALSE(p.contains("light_stability"));
+  EXPECT_FALSE(p["frames"][0].contains("light"));
+  EXPECT_FALSE(fs::exists(dir.path() / "plain" / "light"));
+}
+
+TEST(CapturePlan, LightExposuresAndSettleAreChecked) {
+  std::string error;
+  CapturePlan p;
+  p.light_exposures_s = {1e-4, 1e-4};
+  EXPECT_FALSE(p.IsValid(&error));
+  p.light_exposures_s = {};
+  p.light_nd_factor = 10;
+  EXPECT_FALSE(p.IsValid(&error));
+  EXPECT_NE(error.find("ND"), std::string::npos);
+  p.light_nd_factor = 1;
+  p.settle_s = -1;
+  EXPECT_FALSE(p.IsValid(&error));
+  p.settle_s = 0.5;
+  p.light_exposures_s = {3e-6, 1e-4};
+  EXPECT_TRUE(p.IsValid(&error)) << error;
+}
+
 // A simulated rig's imperfections are recorded under rig.simulation (an ideal rig has none), the
 // frames keep the head's angles, and a resume with other imperfections is refused.
 TEST(Capture, ManifestRecordsTheSimulatedRigsImperfections) {

@@ -92,13 +92,18 @@ std::vector<std::string> with(std::vector<std::string> a, const std::vector<std:
 
 void parseHead(const ConfigNode& h, Rig& rig) {
   std::string driver = h["driver"].string();
+  if (h.has("settle_s")) {
+    const double s = h["settle_s"].number();
+    if (!(s >= 0 && s <= 60)) h["settle_s"].fail("must be in [0, 60] seconds, got " + text(s));
+    rig.settle.settle_s = s;
+  }
   if (driver == "simulated") {
     rig.head_driver = HeadDriver::kSimulated;
-    h.checkKnownKeys({"driver", "speed_deg_s"});
+    h.checkKnownKeys({"driver", "speed_deg_s", "settle_s"});
     rig.simulated_head.speed_deg_s = nonNegative(h, "speed_deg_s", 0);
   } else if (driver == "gpio_stepper") {
     rig.head_driver = HeadDriver::kGpioStepper;
-    h.checkKnownKeys(with({"driver", "chip", "step_line", "dir_line", "enable_line",
+    h.checkKnownKeys(with({"driver", "settle_s", "chip", "step_line", "dir_line", "enable_line",
                            "enable_active_low", "dir_high_is_positive", "home_line",
                            "home_active_low", "step_pulse_us", "dir_setup_us"},
                           kGeometryKeys));
@@ -124,8 +129,8 @@ void parseHead(const ConfigNode& h, Rig& rig) {
     parseGeometry(h, g.geometry);
   } else if (driver == "tic") {
     rig.head_driver = HeadDriver::kTic;
-    h.checkKnownKeys(with({"driver", "serial", "step_mode_microsteps", "command_timeout_s",
-                           "move_timeout_s"},
+    h.checkKnownKeys(with({"driver", "settle_s", "serial", "step_mode_microsteps",
+                           "command_timeout_s", "move_timeout_s"},
                           kGeometryKeys));
     auto& t = rig.tic;
     t.serial = h.string("serial", "");
@@ -203,7 +208,8 @@ void parseSensor(const ConfigNode& s, Rig& rig) {
 void parseSimulation(const ConfigNode& s, Rig& rig) {
   s.checkKnownKeys({"lens", "width_px", "height_px", "sensor_width_mm", "sensor_height_mm",
                     "grid_size", "spectral_samples", "light_irradiance", "starburst_radius_px",
-                    "max_ghosts", "seed", "optical_axis_offset_px", "angle_zero_offset_deg"});
+                    "max_ghosts", "seed", "optical_axis_offset_px", "angle_zero_offset_deg",
+                    "light_drift_pct"});
   auto& x = rig.simulation;
   x.lens = s["lens"].string();
   x.width_px = integerIn(s, "width_px", x.width_px, 8, 20000);
@@ -235,6 +241,12 @@ void parseSimulation(const ConfigNode& s, Rig& rig) {
       s["angle_zero_offset_deg"].fail("must be within ±5 degrees, got " + text(o));
     x.angle_zero_offset_deg = o;
   }
+  if (s.has("light_drift_pct")) {
+    const double d = s["light_drift_pct"].number();
+    if (std::abs(d) > 50.0)
+      s["light_drift_pct"].fail("must be within ±50 percent, got " + text(d));
+    x.light_drift_pct = d;
+  }
 }
 
 void parseLens(const ConfigNode& l, Rig& rig) {
@@ -259,7 +271,8 @@ void parseFaults(const ConfigNode& f, Rig& rig) {
 
 void parseCapture(const ConfigNode& c, Rig& rig) {
   c.checkKnownKeys({"from_deg", "to_deg", "step_deg", "exposures_s", "dark_frames", "iso",
-                    "f_number", "max_retries", "retry_delay_s"});
+                    "f_number", "max_retries", "retry_delay_s", "light_exposure_s",
+                    "light_nd_factor"});
   auto& x = rig.capture;
   x.from_deg = c.number("from_deg", x.from_deg);
   x.to_deg = c.number("to_deg", x.to_deg);
@@ -275,6 +288,28 @@ void parseCapture(const ConfigNode& c, Rig& rig) {
   x.f_number = positive(c, "f_number", x.f_number);
   x.max_retries = integerIn(c, "max_retries", x.max_retries, 0, 100);
   x.retry_delay_s = nonNegative(c, "retry_delay_s", x.retry_delay_s);
+  if (c.has("light_exposure_s")) {
+    const ConfigNode t = c["light_exposure_s"];
+    std::vector<double> times = t.isArray() ? t.numbers() : std::vector<double>{t.number()};
+    if (!t.isArray() && times[0] == 0) times.clear();  // 0 = none
+    if (times.size() > 8) t.fail("takes at most 8 exposure times");
+    for (size_t i = 0; i < times.size(); ++i) {
+      if (!(times[i] > 0 && times[i] <= 60))
+        t.fail("exposure times must be in (0, 60] seconds (a single 0 = none), got " + text(times[i]));
+      for (size_t j = 0; j < i; ++j)
+        if (times[j] == times[i]) t.fail("exposure times must differ");
+    }
+    x.light_exposures_s = times;
+  }
+  if (c.has("light_nd_factor")) {
+    const double k = c["light_nd_factor"].number();
+    if (!(k >= 1 && k <= 1e12))
+      c["light_nd_factor"].fail("must be a filter's attenuation in [1, 1e12] (10^density), got " +
+                                text(k));
+    if (x.light_exposures_s.empty() && k != 1)
+      c["light_nd_factor"].fail("declares the filter of the light exposure: set light_exposure_s too");
+    x.light_nd_factor = k;
+  }
 }
 
 }  // namespace

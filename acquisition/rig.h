@@ -66,6 +66,13 @@ struct SimulatedHeadConfig {
   double speed_deg_s = 0;  // 0 = moves are instantaneous; else the simulated move takes time
 };
 
+// What every head shares: the pause after each move before the first exposure, for the head and
+// the camera on it to stop swinging (a stepper's ringing, a belt's spring). Real heads need it;
+// the simulated one keeps it too (tests set it tiny).
+struct HeadSettleConfig {
+  double settle_s = 0;  // seconds (0 = expose at once), at most 60
+};
+
 struct Gphoto2Config {
   // Camera model as gphoto2 --auto-detect lists it ("" = the first camera; for a PTP/IP port
   // "" = libgphoto2's generic "PTP/IP Camera").
@@ -115,6 +122,11 @@ struct SimulationConfig {
   // The head's reading at which the light is on the optical axis, degrees (|o| ≤ 5; default 0):
   // the scene is rendered at θ − o while frames and manifest keep the head's θ.
   double angle_zero_offset_deg = 0.0;
+  // A light that drifts: its irradiance changes linearly by this many percent from the capture
+  // plan's first frame to its last (and the end-of-capture light check), for the capture's light
+  // stability figures to measure (|d| ≤ 50; default 0). The frames, their light exposures and
+  // truth/ all carry it.
+  double light_drift_pct = 0.0;
 };
 
 // The lens on a real rig's camera (a simulated rig's lens is its [simulation] prescription).
@@ -136,6 +148,14 @@ struct FaultConfig {
 struct CaptureDefaults {
   double from_deg = 0, to_deg = 20, step_deg = 0.5;
   std::vector<double> exposures_s{0.25, 1, 4};
+  // The light exposures (acquisition/capture.h): more exposures in each bracket, the shortest
+  // short enough that the light's own image does not clip, merged apart from the frames; they
+  // measure the light's flux and peak (flarekit metrics) and its stability. Empty = none. The
+  // rig key light_exposure_s takes one time or a list (0 = none).
+  std::vector<double> light_exposures_s;
+  // The attenuation of a neutral-density filter the light exposure is taken through (declared,
+  // ≥ 1; 10^density): its values are multiplied by it. 1 = no filter.
+  double light_nd_factor = 1;
   int dark_frames = 0;
   double iso = 100;
   double f_number = 8;
@@ -155,6 +175,7 @@ struct Rig {
   HeadDriver head_driver = HeadDriver::kSimulated;
   CameraDriver camera_driver = CameraDriver::kSimulated;
   SimulatedHeadConfig simulated_head;
+  HeadSettleConfig settle;  // [head] settle_s, every driver
   GpioStepperConfig gpio;
   TicConfig tic;
   Gphoto2Config gphoto2;

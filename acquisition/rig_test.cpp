@@ -1,6 +1,7 @@
 // Rig files: the shipped ones load; bad ones give one line naming the file, the key and the
 // problem.
 #include "acquisition/rig.h"
+#include "acquisition/capture.h"
 
 #include <gtest/gtest.h>
 
@@ -180,6 +181,60 @@ TEST(Rig, BadSimulatedImperfectionsNameTheKey) {
   for (const auto& c : cases) {
     SCOPED_TRACE(c.keys);
     const std::string e = errorOf(simulatedRig(c.keys));
+    EXPECT_NE(e.find("bad.toml"), std::string::npos) << e;
+    EXPECT_NE(e.find(std::string(c.key) + ":"), std::string::npos) << e;
+    EXPECT_EQ(e.find('\n'), std::string::npos) << e;
+  }
+}
+
+// The capture-trust keys: a settle pause on every head, light exposures (one time or a list), a
+// declared ND filter, and a simulated light that drifts.
+TEST(Rig, SettleLightExposuresAndDrift) {
+  testing::TempDir dir;
+  const Rig plain = loadRigText(dir, "plain.toml", simulatedRig(""));
+  EXPECT_EQ(plain.settle.settle_s, 0.0);
+  EXPECT_TRUE(plain.capture.light_exposures_s.empty());
+  EXPECT_EQ(plain.capture.light_nd_factor, 1.0);
+  EXPECT_EQ(plain.simulation.light_drift_pct, 0.0);
+  std::string text = simulatedRig("light_drift_pct = 2\n");
+  text.replace(text.find("[head]\n"), 7, "[head]\nsettle_s = 0.25\n");
+  text += "[capture]\nlight_exposure_s = [3e-6, 1e-4]\nlight_nd_factor = 100\n";
+  const Rig rig = loadRigText(dir, "rig.toml", text);
+  EXPECT_EQ(rig.settle.settle_s, 0.25);
+  EXPECT_EQ(rig.capture.light_exposures_s, (std::vector<double>{3e-6, 1e-4}));
+  EXPECT_EQ(rig.capture.light_nd_factor, 100.0);
+  EXPECT_EQ(rig.simulation.light_drift_pct, 2.0);
+  const CapturePlan plan = CapturePlan::FromRig(rig);
+  EXPECT_EQ(plan.settle_s, 0.25);
+  EXPECT_EQ(plan.light_exposures_s, rig.capture.light_exposures_s);
+  EXPECT_EQ(plan.light_nd_factor, 100.0);
+  const Rig one = loadRigText(dir, "one.toml", simulatedRig("") + "[capture]\nlight_exposure_s = 5e-6\n");
+  EXPECT_EQ(one.capture.light_exposures_s, (std::vector<double>{5e-6}));
+  const Rig none = loadRigText(dir, "none.toml", simulatedRig("") + "[capture]\nlight_exposure_s = 0\n");
+  EXPECT_TRUE(none.capture.light_exposures_s.empty());
+  // Real heads take settle_s too (the shipped ones pause).
+  EXPECT_GT(loadRig(kRigs / "pi-stepper-eos.toml").settle.settle_s, 0.0);
+  EXPECT_GT(loadRig(kRigs / "tic-eos.toml").settle.settle_s, 0.0);
+  EXPECT_EQ(errorOf(std::string(kGpioRig).insert(kGpioRig.find("[camera]"), "settle_s = 0.5\n")), "");
+}
+
+TEST(Rig, BadTrustKeysNameTheKey) {
+  const struct {
+    std::string text;
+    const char* key;
+  } cases[] = {
+      {std::string(kGpioRig).insert(kGpioRig.find("[camera]"), "settle_s = -1\n"), "head.settle_s"},
+      {std::string(kGpioRig).insert(kGpioRig.find("[camera]"), "settle_s = 61\n"), "head.settle_s"},
+      {kGpioRig + "[capture]\nlight_exposure_s = -1\n", "capture.light_exposure_s"},
+      {kGpioRig + "[capture]\nlight_exposure_s = [1e-4, 1e-4]\n", "capture.light_exposure_s"},
+      {kGpioRig + "[capture]\nlight_exposure_s = [0, 1e-4]\n", "capture.light_exposure_s"},
+      {kGpioRig + "[capture]\nlight_nd_factor = 100\n", "capture.light_nd_factor"},
+      {kGpioRig + "[capture]\nlight_exposure_s = 1e-4\nlight_nd_factor = 0.5\n", "capture.light_nd_factor"},
+      {simulatedRig("light_drift_pct = 60\n"), "simulation.light_drift_pct"},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.text);
+    const std::string e = errorOf(c.text);
     EXPECT_NE(e.find("bad.toml"), std::string::npos) << e;
     EXPECT_NE(e.find(std::string(c.key) + ":"), std::string::npos) << e;
     EXPECT_EQ(e.find('\n'), std::string::npos) << e;

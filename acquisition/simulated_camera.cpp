@@ -100,8 +100,10 @@ RawFrame SimulatedCamera::expose(const cv::Mat& radiance, bool dark) {
   uint64_t seed = mixSeed(seed_, static_cast<uint64_t>(angle_mdeg));
   seed = mixSeed(seed, exposure_bits);
   seed = mixSeed(seed, dark ? 1 : 0);
+  if (light_exposure_) seed = mixSeed(seed, 2);
   RawFrame frame;
-  frame.data = exposer_(radiance, exposure_s_, iso_, seed);
+  const double scale = light_scale_ / attenuation_;
+  frame.data = exposer_(scale == 1.0 || dark ? radiance : cv::Mat(radiance * scale), exposure_s_, iso_, seed);
   frame.cfa = cfa_;
   frame.black_level = black_;
   frame.white_level = white_(iso_);

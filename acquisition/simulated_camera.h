@@ -95,6 +95,18 @@ class SimulatedCamera : public Camera {
   SceneProvider& scene() { return *scene_; }
   double fNumber() const { return f_number_; }
 
+  // The light's irradiance relative to the rig's (a drifting light, [simulation]
+  // light_drift_pct): scales what the following exposures see (1 = as rendered, bit for bit).
+  void setLightScale(double scale) { light_scale_ = scale; }
+  double lightScale() const { return light_scale_; }
+  // The light exposure (acquisition/capture.h): the following exposures see the light through a
+  // neutral-density filter of `attenuation` (≥ 1), and draw their noise apart from the bracket's
+  // (an exposure of the same time is another photograph). Off: the bracket's exposures.
+  void setLightExposure(bool on, double attenuation = 1) {
+    light_exposure_ = on;
+    attenuation_ = on ? attenuation : 1;
+  }
+
  private:
   RawFrame expose(const cv::Mat& radiance, bool dark);
   const cv::Mat& radianceAt(double angle_deg);
@@ -112,6 +124,8 @@ class SimulatedCamera : public Camera {
   double cached_angle_ = 0, cached_f_number_ = 0;
   bool cached_ = false;
   cv::Mat cached_radiance_;
+  double light_scale_ = 1, attenuation_ = 1;
+  bool light_exposure_ = false;
 };
 
 // A 64-bit mix of values (splitmix64), for per-frame seeds.

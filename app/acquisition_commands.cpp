@@ -195,6 +195,8 @@ void registerCapture(CLI::App& app) {
     double from = 0, to = 0, step = 0;
     std::string exposures_text;
     int dark_frames = -1;
+    std::string light_exposures_text;
+    double light_nd = 0;
     bool keep_raw = false, resume = false, no_truth = false, half_frames = false;
   };
   auto o = std::make_shared<Options>();
@@ -208,6 +210,12 @@ void registerCapture(CLI::App& app) {
   cmd->add_option("--step", o->step, "Angle step in degrees (default: the rig's)");
   cmd->add_option("--exposures", o->exposures_text, "Bracket in seconds, e.g. 0.25,1,4");
   cmd->add_option("--dark-frames", o->dark_frames, "Dark frames averaged per exposure");
+  cmd->add_option("--light-exposure", o->light_exposures_text,
+                  "Light exposures in seconds, e.g. 3e-6,1e-4, taken in each bracket and merged apart "
+                  "for the light's flux and stability; 0 = none (default: the rig's light_exposure_s)");
+  cmd->add_option("--light-nd", o->light_nd,
+                  "The light exposure's declared ND filter attenuation, ≥ 1 (default: the rig's "
+                  "light_nd_factor)");
   cmd->add_flag("--keep-raw", o->keep_raw, "Also keep the RAW exposures (raw/*.png)");
   cmd->add_flag("--resume", o->resume, "Continue the capture in --out where it stopped");
   cmd->add_flag("--no-truth", o->no_truth, "Simulated rigs: do not write truth/");
@@ -222,6 +230,12 @@ void registerCapture(CLI::App& app) {
     if (!o->exposures_text.empty())
       plan.exposures_s = parseTimes(o->exposures_text, "capture: --exposures");
     if (o->dark_frames >= 0) plan.dark_frames = o->dark_frames;
+    if (cmd->count("--light-exposure"))
+      plan.light_exposures_s = o->light_exposures_text == "0"
+                                   ? std::vector<double>{}
+                                   : parseTimes(o->light_exposures_text, "capture: --light-exposure");
+    if (cmd->count("--light-nd")) plan.light_nd_factor = o->light_nd;
+    if (plan.light_exposures_s.empty() && !cmd->count("--light-nd")) plan.light_nd_factor = 1;
     plan.keep_raw = o->keep_raw;
     std::string error;
     if (!plan.IsValid(&error)) throw InputError("capture: " + error);
@@ -243,6 +257,12 @@ void registerCapture(CLI::App& app) {
                            numberText(plan.to_deg) + " --step " + numberText(plan.step_deg) + " --exposures ";
       for (size_t i = 0; i < plan.exposures_s.size(); ++i) resume += (i ? "," : "") + numberText(plan.exposures_s[i]);
       resume += " --dark-frames " + std::to_string(plan.dark_frames);
+      if (!plan.light_exposures_s.empty()) {
+        resume += " --light-exposure ";
+        for (size_t i = 0; i < plan.light_exposures_s.size(); ++i)
+          resume += (i ? "," : "") + numberText(plan.light_exposures_s[i]);
+        resume += " --light-nd " + numberText(plan.light_nd_factor);
+      }
       if (o->keep_raw) resume += " --keep-raw";
       if (o->no_truth) resume += " --no-truth";
       if (o->half_frames) resume += " --half-frames";

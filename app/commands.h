@@ -19,6 +19,7 @@ void registerFitCommands(CLI::App& app);          // app/fit_commands.cpp
 void registerPredictCommands(CLI::App& app);      // app/predict_commands.cpp
 void registerViewCommands(CLI::App& app);         // app/view_commands.cpp
 void registerDatasetCommands(CLI::App& app);      // app/dataset_commands.cpp
+void registerMetricsCommands(CLI::App& app);      // app/metrics_commands.cpp
 void registerDemoCommand(CLI::App& app);          // app/demo_command.cpp
 
 // The "bench" subcommand that layers add their benchmarks to ("flarekit bench render ...").

@@ -37,6 +37,7 @@ int main(int argc, char** argv) {
   app::registerPredictCommands(app);
   app::registerViewCommands(app);
   app::registerDatasetCommands(app);
+  app::registerMetricsCommands(app);
   app::registerDemoCommand(app);
 
   try {

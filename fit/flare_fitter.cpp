@@ -89,27 +89,13 @@ nlohmann::json FitSummary::toJson() const {
   return j;
 }
 
-FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
+FitResult measureCaptureGeometry(const FrameStack& stack, const FlareFitterOptions& options) {
   std::string error;
   if (!options.IsValid(&error)) throw std::invalid_argument(error);
-  const auto t0 = Clock::now();
   FitResult result;
   FitSummary& sum = result.summary;
-  sum.frames_total = static_cast<int>(full.frames.size());
-  // Held out: the fit sees the even frames only.
-  FrameStack held;
-  const FrameStack* used = &full;
-  if (options.holdout_odd) {
-    held = full;
-    held.frames.clear();
-    for (size_t i = 0; i < full.frames.size(); i += 2) held.frames.push_back(full.frames[i]);
-    used = &held;
-  }
-  const FrameStack& stack = *used;
-  for (size_t i = 0; i < full.frames.size(); i += options.holdout_odd ? 2 : 1)
-    result.frames_used.push_back(static_cast<int>(i));
-  sum.frames_used = static_cast<int>(stack.frames.size());
-
+  sum.frames_total = sum.frames_used = static_cast<int>(stack.frames.size());
+  for (size_t i = 0; i < stack.frames.size(); ++i) result.frames_used.push_back(static_cast<int>(i));
   auto t = Clock::now();
   result.horizon = measureHorizon(stack, options.horizon);
   result.light = measureLightPattern(stack, result.horizon, options.light_pattern);
@@ -143,7 +129,47 @@ FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
   if (result.candidates.empty())
     sum.warnings.push_back("No ghost was found in the capture: the model is empty.");
 
-  t = Clock::now();
+  return result;
+}
+
+FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
+  std::string error;
+  if (!options.IsValid(&error)) throw std::invalid_argument(error);
+  const auto t0 = Clock::now();
+  FitResult result;
+  FitSummary& sum = result.summary;
+  sum.frames_total = static_cast<int>(full.frames.size());
+  // Held out: the fit sees the even frames only.
+  FrameStack held;
+  const FrameStack* used = &full;
+  if (options.holdout_odd) {
+    held = full;
+    held.frames.clear();
+    for (size_t i = 0; i < full.frames.size(); i += 2) held.frames.push_back(full.frames[i]);
+    used = &held;
+  }
+  const FrameStack& stack = *used;
+  for (size_t i = 0; i < full.frames.size(); i += options.holdout_odd ? 2 : 1)
+    result.frames_used.push_back(static_cast<int>(i));
+  sum.frames_used = static_cast<int>(stack.frames.size());
+
+  FitResult geometry = measureCaptureGeometry(stack, options);
+  result.horizon = std::move(geometry.horizon);
+  result.light = std::move(geometry.light);
+  result.sweep = std::move(geometry.sweep);
+  result.traces = std::move(geometry.traces);
+  result.candidates = std::move(geometry.candidates);
+  for (const auto& w : geometry.summary.warnings) sum.warnings.push_back(w);
+  sum.horizon_y_px = geometry.summary.horizon_y_px;
+  sum.light_frames = geometry.summary.light_frames;
+  sum.optical_zero = geometry.summary.optical_zero;
+  sum.traces = geometry.summary.traces;
+  sum.candidates = geometry.summary.candidates;
+  sum.seconds_horizon = geometry.summary.seconds_horizon;
+  sum.seconds_sweep = geometry.summary.seconds_sweep;
+  sum.seconds_candidates = geometry.summary.seconds_candidates;
+
+  auto t = Clock::now();
   std::vector<int> frames;
   for (size_t i = 0; i < stack.frames.size(); i += options.frame_stride) frames.push_back(static_cast<int>(i));
   if (options.skip_frame_fit) {

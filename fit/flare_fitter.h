@@ -80,6 +80,13 @@ struct FitResult {
   FitSummary summary;
 };
 
+// Stages 2–4 alone (the capture's geometry, no fitting): the horizon, the light in every frame
+// and its pattern, the sweep and its traces, the ghost candidates, the optical zero, and the
+// lights the optical zero's curve places where the frame's edge cuts or hides their core. The
+// result holds those and the summary's horizon, light, optical-zero, trace and candidate figures;
+// the model and frame fits are empty. fitFlare starts with it; `flarekit metrics` reports it.
+FitResult measureCaptureGeometry(const FrameStack& stack, const FlareFitterOptions& options = {});
+
 // Fits the stack. Throws std::invalid_argument for invalid options. A capture with no ghost gives
 // an empty model and a warning in the summary.
 FitResult fitFlare(const FrameStack& stack, const FlareFitterOptions& options);

@@ -13,6 +13,7 @@
 #include "common/atomic_file.h"
 #include "common/config.h"
 #include "common/image.h"
+#include "common/plot.h"
 #include "fit/frame_fits.h"
 #include "model/model_renderer.h"
 
@@ -84,53 +85,6 @@ cv::Mat ceilingSheet(const CeilingFrame& frame) {
                      {"|flare - ceiling|", cv::abs(frame.flare - frame.described)}},
                     lo, hi);
 }
-
-// A tick step of 1, 2 or 5 × 10^k giving about `count` ticks over `range`.
-double tickStep(double range, int count) {
-  const double raw = range / count, decade = std::pow(10.0, std::floor(std::log10(raw)));
-  for (double m : {1.0, 2.0, 5.0})
-    if (m * decade >= raw) return m * decade;
-  return 10 * decade;
-}
-
-std::string tickLabel(double v) {
-  std::ostringstream s;
-  s << std::setprecision(4) << (std::abs(v) < 1e-9 ? 0.0 : v);
-  return s.str();
-}
-
-// A panel of the plot: data coordinates onto a pixel rectangle, with a frame, grid and labels.
-struct PlotPanel {
-  cv::Rect area;
-  double x0, x1, y0, y1;
-
-  int px(double x) const {
-    return area.x + static_cast<int>(std::lround((x - x0) / (x1 - x0) * area.width));
-  }
-  int py(double y) const {
-    return area.y + area.height - static_cast<int>(std::lround((y - y0) / (y1 - y0) * area.height));
-  }
-
-  void drawAxes(cv::Mat& image, const std::string& y_label, bool x_labels) const {
-    const cv::Scalar grid(225, 225, 225), ink(60, 60, 60);
-    const double ys = tickStep(y1 - y0, 5);
-    for (double y = std::ceil(y0 / ys) * ys; y <= y1 + 1e-9; y += ys) {
-      cv::line(image, {area.x, py(y)}, {area.x + area.width, py(y)}, grid);
-      cv::putText(image, tickLabel(y), {area.x - 42, py(y) + 4}, cv::FONT_HERSHEY_SIMPLEX, 0.4, ink,
-                  1, cv::LINE_AA);
-    }
-    const double xs = tickStep(x1 - x0, 10);
-    for (double x = std::ceil(x0 / xs) * xs; x <= x1 + 1e-9; x += xs) {
-      cv::line(image, {px(x), area.y}, {px(x), area.y + area.height}, grid);
-      if (x_labels)
-        cv::putText(image, tickLabel(x), {px(x) - 8, area.y + area.height + 16},
-                    cv::FONT_HERSHEY_SIMPLEX, 0.4, ink, 1, cv::LINE_AA);
-    }
-    cv::rectangle(image, area, ink);
-    cv::putText(image, y_label, {area.x + 4, area.y - 6}, cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1,
-                cv::LINE_AA);
-  }
-};
 
 }  // namespace
 
