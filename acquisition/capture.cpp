@@ -62,6 +62,7 @@ bool CapturePlan::IsValid(std::string* error) const {
   }
   if (!(light_nd_factor >= 1 && light_nd_factor <= 1e12))
     return fail("the light exposure's ND factor must be in [1, 1e12]");
+  if (light_check_repeats < 1 || light_check_repeats > 256) return fail("light_check_repeats must be 1..256");
   if (light_nd_factor != 1 && light_exposures_s.empty())
     return fail("an ND factor declares the light exposure's filter: it needs a light exposure");
   return true;
@@ -94,6 +95,7 @@ CapturePlan CapturePlan::FromRig(const Rig& rig) {
   p.settle_s = rig.settle.settle_s;
   p.light_exposures_s = rig.capture.light_exposures_s;
   p.light_nd_factor = rig.capture.light_nd_factor;
+  p.light_check_repeats = rig.capture.light_check_repeats;
   return p;
 }
 
@@ -173,9 +175,15 @@ class Session {
   void settle() const;
   // The simulated light's drift at plan position `index` (−1: the end-of-capture check).
   void applyLightDrift(int index);
-  // Takes the light exposure at the head's angle and writes it to `file`: its manifest entry.
-  Json takeLightExposure(int index, double angle_deg, const std::string& file);
-  // The end-of-capture light check and the light's stability.
+  // Takes the light exposures at the head's angle and writes them to `file` (none when empty):
+  // their manifest entry. `take` > 0: a light check's k-th photograph at a frame's angle.
+  Json takeLightExposure(int index, double angle_deg, const std::string& file, int take = 0);
+  // plan_.light_check_repeats light exposures at the head's angle (takes first_take, …): their
+  // mean flux and peak, the fluxes' spread, clipped photosites.
+  Json measureLightRepeatedly(int index, double angle_deg, int first_take);
+  // The light check's start, at the first frame that shows the whole light (right after it).
+  void startLightCheck(int index, double angle_deg, const Json& light);
+  // The light check's end, back at that frame's angle after the last frame; the drift.
   void checkLight();
   void updateLightStability();
 
@@ -259,6 +267,7 @@ Json Session::newManifest() const {
   if (!plan_.light_exposures_s.empty()) {
     m["plan"]["light_exposures_s"] = plan_.light_exposures_s;
     m["plan"]["light_nd_factor"] = plan_.light_nd_factor;
+    m["plan"]["light_check_repeats"] = plan_.light_check_repeats;
     m["light_stability"] = {{"frames", 0}, {"reference_frame_index", nullptr},
                             {"drift_pct", nullptr}, {"scatter_pct", nullptr}};
   }
@@ -288,7 +297,7 @@ void Session::checkResume(const ConfigNode& old) const {
   const auto simulation = old["rig"].find("simulation");
   differs("rig's simulated axis offset, angle zero or light drift",
           simulation ? simulation->json() : Json(), fresh["rig"].value("simulation", Json()));
-  for (const char* key : {"light_exposures_s", "light_nd_factor", "settle_s"}) {
+  for (const char* key : {"light_exposures_s", "light_nd_factor", "light_check_repeats", "settle_s"}) {
     const auto was = old["plan"].find(key);
     differs(std::string("plan's ") + key, was ? was->json() : Json(), fresh["plan"].value(key, Json()));
   }
@@ -387,7 +396,7 @@ void Session::applyLightDrift(int index) {
   sim_camera_->setLightScale(1.0 + rig_.simulation.light_drift_pct / 100.0 * progress);
 }
 
-Json Session::takeLightExposure(int index, double angle_deg, const std::string& file) {
+Json Session::takeLightExposure(int index, double angle_deg, const std::string& file, int take) {
   const double nd = plan_.light_nd_factor;
   std::vector<RawFrame> raws;
   for (double t : plan_.light_exposures_s) {
@@ -399,7 +408,7 @@ Json Session::takeLightExposure(int index, double angle_deg, const std::string& 
         SimulatedCamera* c;
         ~Filter() { c->setLightExposure(false); }
       } filter{sim_camera_};
-      sim_camera_->setLightExposure(true, nd);
+      sim_camera_->setLightExposure(true, nd, take);
       return dev_.camera->capture();
     }));
     ++summary_.exposures_taken;
@@ -423,11 +432,13 @@ Json Session::takeLightExposure(int index, double angle_deg, const std::string& 
   exr.attributes["flarekit.light_nd_factor"] = nd;
   exr.attributes["flarekit.light_exposure"] =
       std::string("the light's own exposures, merged apart from the frames; values times the ND factor");
-  createFolder(out_ / "light");
-  writeExr(out_ / file, exr);
+  if (!file.empty()) {
+    createFolder(out_ / "light");
+    writeExr(out_ / file, exr);
+  }
   const ExrLayer* sat = exr.find("saturated");
   const LightSpot spot = measureLightSpot(exr.main(), sat ? sat->image : cv::Mat());
-  Json e = {{"file", file},
+  Json e = {{"file", file.empty() ? Json() : Json(file)},
             {"exposures_s", meta.exposures_s},
             {"nd_factor", nd},
             {"found", spot.found},
@@ -437,8 +448,10 @@ Json Session::takeLightExposure(int index, double angle_deg, const std::string& 
             {"flux_radius_px", spot.flux_radius_px},
             {"cut", spot.cut},
             {"saturated_photosites", merged.saturated_count}};
+  if (file.empty()) e.erase("file");
   if (merged.saturated_count > 0) {
-    const std::string w = "frame " + std::to_string(index) + ": the light exposure clipped (" +
+    const std::string w = "frame " + std::to_string(index) + (take > 0 ? " (light check)" : "") +
+                          ": the light exposure clipped (" +
                           std::to_string(merged.saturated_count) +
                           " photosites): its flux and peak are lower bounds; shorten the "
                           "shortest light_exposure_s or declare a denser light_nd_factor";
@@ -491,6 +504,9 @@ void Session::captureFrame(int index, double angle_deg) {
   for (const auto& c : merged.ratio_checks) ratios.push_back(c.measured_ratio);
   entry["exposure_ratios"] = ratios;
   if (!light.is_null()) entry["light"] = light;
+  if (!light.is_null() && !manifest_.contains("light_check") && light["found"].get<bool>() &&
+      !light["cut"].get<bool>() && light["saturated_photosites"].get<long long>() == 0)
+    startLightCheck(index, angle_deg, light);
 
   if (plan_.keep_raw) {
     createFolder(out_ / "raw");
@@ -610,13 +626,15 @@ void Session::updateLightStability() {
   }
   if (manifest_.contains("light_check")) {
     const Json& c = manifest_["light_check"];
-    for (size_t k = 0; k < frames.size(); ++k)
-      if (frames[k]["index"] == c["frame_index"] && frames[k].contains("light")) {
-        const double f0 = frames[k]["light"]["flux"].get<double>();
-        if (f0 > 0 && c["saturated_photosites"].get<long long>() == 0)
-          st["drift_pct"] = 100.0 * (c["flux"].get<double>() / f0 - 1.0);
-        st["reference_frame_index"] = c["frame_index"];
-      }
+    st["reference_frame_index"] = c["frame_index"];
+    if (c.contains("end")) {
+      const double f0 = c["start"]["flux"].get<double>(), f1 = c["end"]["flux"].get<double>();
+      if (f0 > 0 && c["start"]["saturated_photosites"].get<long long>() == 0 &&
+          c["end"]["saturated_photosites"].get<long long>() == 0)
+        st["drift_pct"] = 100.0 * (f1 / f0 - 1.0);
+      else
+        clipped = true;
+    }
   }
   std::vector<std::string> problems;
   if (st["drift_pct"].is_number() && std::abs(st["drift_pct"].get<double>()) > 1.0) {
@@ -638,31 +656,54 @@ void Session::updateLightStability() {
   manifest_["light_stability"] = st;
 }
 
+Json Session::measureLightRepeatedly(int index, double angle_deg, int first_take) {
+  const int n = plan_.light_check_repeats;
+  std::vector<double> fluxes;
+  double peak = 0;
+  long long clipped = 0;
+  for (int k = 0; k < n; ++k) {
+    const Json e = takeLightExposure(index, angle_deg, "", first_take + k);
+    fluxes.push_back(e["flux"].get<double>());
+    peak += e["peak"].get<double>() / n;
+    clipped += e["saturated_photosites"].get<long long>();
+  }
+  double mean = 0, var = 0;
+  for (double f : fluxes) mean += f / n;
+  for (double f : fluxes) var += (f - mean) * (f - mean) / std::max(1, n - 1);
+  return {{"flux", mean},
+          {"flux_sd_pct", mean > 0 && n > 1 ? Json(100.0 * std::sqrt(var) / mean) : Json()},
+          {"peak", peak},
+          {"saturated_photosites", clipped},
+          {"fluxes", fluxes}};
+}
+
+void Session::startLightCheck(int index, double angle_deg, const Json& light) {
+  (void)light;
+  manifest_["light_check"] = {{"frame_index", index},
+                              {"angle_deg", angle_deg},
+                              {"repeats", plan_.light_check_repeats},
+                              {"start", measureLightRepeatedly(index, angle_deg, 1)}};
+}
+
 void Session::checkLight() {
   if (plan_.light_exposures_s.empty()) return;
-  updateLightStability();
-  const Json& st = manifest_["light_stability"];
-  if (st["reference_frame_index"].is_null()) {
-    const std::string w = "no frame's light exposure holds the whole light: the light's drift cannot "
+  if (!manifest_.contains("light_check")) {
+    const std::string w = "no frame's light exposure holds the whole, unclipped light: the light's drift cannot "
                           "be measured (a sweep that passes the optical axis can)";
     logWarning(w);
     summary_.warnings.push_back(w);
+    updateLightStability();
     return;
   }
-  const int index = st["reference_frame_index"].get<int>();
+  Json& check = manifest_["light_check"];
+  const int index = check["frame_index"].get<int>();
   const double angle = angles_[index];
   attempts_ = 0;
   retry("moving the head back to " + std::to_string(angle) + "° for the light check", false, index,
         [&] { dev_.head->moveTo(angle); });
   settle();
   applyLightDrift(-1);
-  Json e = takeLightExposure(index, angle, "light/check_end.exr");
-  manifest_["light_check"] = {{"frame_index", index},
-                              {"angle_deg", angle},
-                              {"file", e["file"]},
-                              {"flux", e["flux"]},
-                              {"peak", e["peak"]},
-                              {"saturated_photosites", e["saturated_photosites"]}};
+  check["end"] = measureLightRepeatedly(index, angle, 1 + plan_.light_check_repeats);
   updateLightStability();
   const Json& done = manifest_["light_stability"];
   if (done.contains("warning")) {
@@ -717,6 +758,16 @@ CaptureSummary Session::run() {
                                       {"file", d["file"].string()},
                                       {"frames", d["frames"].integer()}});
       }
+    }
+    // The light check's start, taken at a frame of the stopped session.
+    if (const auto check = root.find("light_check"); check && check->isObject() && !plan_.light_exposures_s.empty()) {
+      const long long index = (*check)["frame_index"].integer();
+      const ConfigNode start = (*check)["start"];
+      if (index >= 0 && index < static_cast<long long>(angles_.size()))
+        manifest_["light_check"] = {{"frame_index", index},
+                                    {"angle_deg", angles_[index]},
+                                    {"repeats", (*check)["repeats"].integer()},
+                                    {"start", start.json()}};
     }
     const ConfigNode frames = root["frames"];
     for (size_t k = 0; k < frames.size(); ++k) {

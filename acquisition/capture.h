@@ -33,8 +33,6 @@
 //                                  frames' units and channels, times the declared
 //                                  light_nd_factor; float, zip; layer "saturated" as in the
 //                                  frames; attributes as a frame's, and flarekit.light_nd_factor
-//   DIR/light/check_end.exr      the same at the end of the capture, back at the light check's
-//                                  angle (light_check below)
 //   DIR/darks/dark_K.exr         averaged dark frame for exposure K (float DN), --dark-frames
 //   DIR/raw/frame_NNNN_eK.dng    --keep-raw: the RAW exposures; DNG for Bayer sensors (levels and
 //                                  EXIF exposure inside), 16-bit PNG (.png) for mono sensors
@@ -58,10 +56,11 @@
 //                      units: "relative irradiance (render units)" for simulated rigs, else
 //                      "electrons/s" (merged value = electrons per second per photosite)
 //   plan              {from_deg, to_deg, step_deg, angles_deg: [...], exposures_s: [...],
-//                      dark_frames, keep_raw, settle_s?, light_exposures_s?, light_nd_factor?}
-//                      (settle_s: the pause after each move before exposing, rig [head] settle_s,
-//                      when not 0; light_exposures_s and light_nd_factor: the light exposures,
-//                      rig [capture] light_exposure_s and light_nd_factor, when there are any)
+//                      dark_frames, keep_raw, settle_s?, light_exposures_s?, light_nd_factor?,
+//                      light_check_repeats?} (settle_s: the pause after each move before
+//                      exposing, rig [head] settle_s, when not 0; the light keys, rig [capture]
+//                      light_exposure_s, light_nd_factor and light_check_repeats, when there are
+//                      light exposures)
 //   truth             true when truth/ holds ground truth for every frame
 //   frames            [{index, angle_deg, file, truth_file?,
 //                       raw_files?: [{file, exposure_s, black_level_dn, white_level_dn}],
@@ -77,17 +76,20 @@
 //                               flux_radius_px = image diagonal / 8 about the light's centre;
 //                               both in the frames' units, common/light_spot.h)
 //                      }] in plan order, one entry per finished frame, never twice
-//   light_check       with light exposures, once the plan is done: the head went back to the
-//                      angle of the first frame whose light was whole (found, not cut, unclipped)
-//                      and took the light exposures again: {frame_index, angle_deg, file, flux,
-//                      peak, saturated_photosites}
+//   light_check       with light exposures: right after the first frame whose light was whole
+//                      (found, not cut, unclipped), plan.light_check_repeats more light exposures
+//                      there (start); once the plan is done, the head goes back to that angle and
+//                      takes as many again (end): {frame_index, angle_deg, repeats, start: {flux
+//                      (their mean), flux_sd_pct (one exposure's spread), peak (mean),
+//                      saturated_photosites, fluxes: [...]}, end?: the same}; no image files
 //   light_stability   with light exposures (rewritten after every frame): {frames (whole light
-//                      measurements), reference_frame_index, drift_pct (100·(check flux / that
-//                      frame's flux − 1); null until light_check), scatter_pct (RMS of the
-//                      frames' fluxes about a quadratic in the angle, % of their mean; null below
-//                      5 frames), warning? (either beyond ±1 %, or a light exposure clipped)}.
-//                      The lens passes less light at wider angles, so the drift is measured by
-//                      returning to one angle, not along the sweep (docs/metrics.md)
+//                      measurements), reference_frame_index (the light check's frame), drift_pct
+//                      (100·(end flux / start flux − 1); null until the end), scatter_pct (RMS of
+//                      the frames' fluxes about a quadratic in the angle, % of their mean: flicker,
+//                      and each one exposure's shot noise; null below 5 frames), warning? (either
+//                      beyond ±1 %, or a light exposure clipped)}. The lens passes less light at
+//                      wider angles, so the drift is measured by returning to one angle, not along
+//                      the sweep (docs/metrics.md)
 //   darks             [{exposure_s, file, frames}] when dark frames were taken
 //   frames_done, frames_planned
 // A frame file is written before the manifest lists it: a frame listed is whole and readable;
@@ -120,6 +122,9 @@ struct CapturePlan {
   // none; each in (0, 60] s, distinct, at most 8.
   std::vector<double> light_exposures_s;
   double light_nd_factor = 1;  // the declared filter's attenuation (≥ 1; only with light exposures)
+  // Light exposures taken for the light check, at its start and again at its end (1–256): their
+  // mean measures the drift with √n times less shot noise than one.
+  int light_check_repeats = 16;
 
   bool IsValid(std::string* error) const;
   // The angles, from from_deg to to_deg in steps of step_deg.

@@ -119,10 +119,11 @@ TEST(Capture, LightExposuresMeasureTheLightAndItsDrift) {
   RigDevices d = devices(rig);
   CapturePlan plan = smallPlan(4, 0.5);
   plan.light_exposures_s = {3.0};
+  plan.light_check_repeats = 4;
   plan.settle_s = 0.01;
   const CaptureSummary s = runCapture(rig, d, plan, dir.path() / "cap");
   expectEveryAngleOnce(dir.path() / "cap", plan);
-  EXPECT_EQ(s.exposures_taken, 9 * 3 + 1);  // the bracket and the light exposure; the light check
+  EXPECT_EQ(s.exposures_taken, 9 * 3 + 2 * 4);  // the bracket and the light exposure; the light check
   const auto m = manifest(dir.path() / "cap");
   EXPECT_EQ(m["plan"]["light_exposures_s"], nlohmann::json({3.0}));
   EXPECT_EQ(m["plan"]["light_nd_factor"], 1.0);
@@ -140,7 +141,9 @@ TEST(Capture, LightExposuresMeasureTheLightAndItsDrift) {
   }
   ASSERT_TRUE(m.contains("light_check"));
   EXPECT_EQ(m["light_check"]["frame_index"], 0);
-  EXPECT_TRUE(fs::exists(dir.path() / "cap" / "light/check_end.exr"));
+  EXPECT_EQ(m["light_check"]["repeats"], 4);
+  EXPECT_EQ(m["light_check"]["start"]["fluxes"].size(), 4u);
+  EXPECT_EQ(m["light_check"]["end"]["fluxes"].size(), 4u);
   const auto& st = m["light_stability"];
   EXPECT_EQ(st["frames"], 9);
   EXPECT_EQ(st["reference_frame_index"], 0);

@@ -272,7 +272,7 @@ void parseFaults(const ConfigNode& f, Rig& rig) {
 void parseCapture(const ConfigNode& c, Rig& rig) {
   c.checkKnownKeys({"from_deg", "to_deg", "step_deg", "exposures_s", "dark_frames", "iso",
                     "f_number", "max_retries", "retry_delay_s", "light_exposure_s",
-                    "light_nd_factor"});
+                    "light_nd_factor", "light_check_repeats"});
   auto& x = rig.capture;
   x.from_deg = c.number("from_deg", x.from_deg);
   x.to_deg = c.number("to_deg", x.to_deg);
@@ -301,6 +301,7 @@ void parseCapture(const ConfigNode& c, Rig& rig) {
     }
     x.light_exposures_s = times;
   }
+  x.light_check_repeats = integerIn(c, "light_check_repeats", x.light_check_repeats, 1, 256);
   if (c.has("light_nd_factor")) {
     const double k = c["light_nd_factor"].number();
     if (!(k >= 1 && k <= 1e12))

@@ -156,6 +156,8 @@ struct CaptureDefaults {
   // The attenuation of a neutral-density filter the light exposure is taken through (declared,
   // ≥ 1; 10^density): its values are multiplied by it. 1 = no filter.
   double light_nd_factor = 1;
+  // Light exposures of the light check, at its start and at its end (1–256).
+  int light_check_repeats = 16;
   int dark_frames = 0;
   double iso = 100;
   double f_number = 8;

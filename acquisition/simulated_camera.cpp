@@ -101,6 +101,7 @@ RawFrame SimulatedCamera::expose(const cv::Mat& radiance, bool dark) {
   seed = mixSeed(seed, exposure_bits);
   seed = mixSeed(seed, dark ? 1 : 0);
   if (light_exposure_) seed = mixSeed(seed, 2);
+  if (take_ > 0) seed = mixSeed(seed, 100 + static_cast<uint64_t>(take_));
   RawFrame frame;
   const double scale = light_scale_ / attenuation_;
   frame.data = exposer_(scale == 1.0 || dark ? radiance : cv::Mat(radiance * scale), exposure_s_, iso_, seed);

@@ -101,10 +101,13 @@ class SimulatedCamera : public Camera {
   double lightScale() const { return light_scale_; }
   // The light exposure (acquisition/capture.h): the following exposures see the light through a
   // neutral-density filter of `attenuation` (≥ 1), and draw their noise apart from the bracket's
-  // (an exposure of the same time is another photograph). Off: the bracket's exposures.
-  void setLightExposure(bool on, double attenuation = 1) {
+  // (an exposure of the same time is another photograph), and `take` > 0 apart from the first
+  // light exposure at that angle (the light check goes back to a frame's angle). Off: the
+  // bracket's exposures.
+  void setLightExposure(bool on, double attenuation = 1, int take = 0) {
     light_exposure_ = on;
     attenuation_ = on ? attenuation : 1;
+    take_ = on ? take : 0;
   }
 
  private:
@@ -126,6 +129,7 @@ class SimulatedCamera : public Camera {
   cv::Mat cached_radiance_;
   double light_scale_ = 1, attenuation_ = 1;
   bool light_exposure_ = false;
+  int take_ = 0;
 };
 
 // A 64-bit mix of values (splitmix64), for per-frame seeds.

@@ -74,6 +74,7 @@ struct ManifestExtras {
   std::map<int, fs::path> light_files;  // plan index → light exposure file
   std::vector<double> light_exposures_s;
   double nd_factor = 1;
+  std::string cfa = "mono";  // camera.cfa
   double settle_s = kNaN;
   LightStability stability;
   std::string units;
@@ -89,6 +90,11 @@ ManifestExtras readExtras(const fs::path& folder) {
     if (!(x.nd_factor >= 1) || !std::isfinite(x.nd_factor)) (*plan)["light_nd_factor"].fail("must be ≥ 1");
   }
   if (auto image = root.find("image")) x.units = image->string("units", "");
+  if (auto camera = root.find("camera")) {
+    x.cfa = camera->string("cfa", "mono");
+    const bool known = x.cfa == "mono" || x.cfa == "RGGB" || x.cfa == "BGGR" || x.cfa == "GRBG" || x.cfa == "GBRG";
+    if (!known) (*camera)["cfa"].fail("must be \"mono\", \"RGGB\", \"BGGR\", \"GRBG\" or \"GBRG\"");
+  }
   const ConfigNode frames = root["frames"];
   for (size_t i = 0; i < frames.size(); ++i) {
     const ConfigNode f = frames[i];
@@ -210,6 +216,79 @@ SubpixelPattern measurePattern(const std::vector<const cv::Mat*>& lums, const st
   std::nth_element(edge.begin(), edge.begin() + edge.size() / 2, edge.end());
   p.image = cv::max(p.image - edge[edge.size() / 2], 0.0f);
   return p;
+}
+
+// Where the light lies when nothing measured it (beyond the frame's edge, or its core cut): the
+// position along the horizon at which the pattern best matches what the frame shows of the light
+// (its tail over the edge), within ±`reach_px` of `guess`. The fit's curve of the light's centres
+// extrapolates beyond the frame by several pixels, which leaves the light's tail at the edge as
+// bright as a ghost.
+cv::Point2d registerLight(const SubpixelPattern& pattern, const cv::Mat& lum, const cv::Mat& known,
+                          cv::Point2d guess, double floor_value, double reach_px = 24) {
+  if (pattern.image.empty()) return guess;
+  std::vector<cv::Point> pixels;
+  for (int y = 0; y < lum.rows; ++y)
+    for (int x = 0; x < lum.cols; ++x)
+      if (known.at<uchar>(y, x) && lum.at<float>(y, x) > floor_value) pixels.emplace_back(x, y);
+  if (pixels.size() < 16) return guess;
+  auto cost = [&](double dx) {
+    const cv::Mat p = pattern.at(lum.size(), {guess.x + dx, guess.y});
+    double s = 0;
+    for (const auto& q : pixels) {
+      const double d = std::log(lum.at<float>(q)) - std::log(std::max<double>(p.at<float>(q), floor_value));
+      s += d * d;
+    }
+    return s;
+  };
+  auto search = [&](double from, double to, double step) {
+    double best = from, best_cost = std::numeric_limits<double>::infinity();
+    for (double dx = from; dx <= to + 1e-9; dx += step)
+      if (const double c = cost(dx); c < best_cost) {
+        best_cost = c;
+        best = dx;
+      }
+    return best;
+  };
+  double dx = search(-reach_px, reach_px, 1.0);
+  dx = search(dx - 1, dx + 1, 0.1);
+  return {guess.x + dx, guess.y};
+}
+
+// A noise-free R,G,B image as a colour sensor's frames show it: sampled through the colour filter
+// array `cfa` ("RGGB", "BGGR", "GRBG" or "GBRG": the top-left 2×2 block row by row) and
+// demosaiced bilinearly, as acquisition/hdr_merge.h's demosaicBilinear does the frames (metrics/
+// does not depend on acquisition/).
+cv::Mat throughCfa(const cv::Mat& rgb, const std::string& cfa) {
+  auto colour = [&](int row, int col) {
+    const char c = cfa[static_cast<size_t>((row & 1) * 2 + (col & 1))];
+    return c == 'R' ? 0 : c == 'G' ? 1 : 2;
+  };
+  const int rows = rgb.rows, cols = rgb.cols;
+  cv::Mat mosaic(rows, cols, CV_32F);
+  for (int y = 0; y < rows; ++y)
+    for (int x = 0; x < cols; ++x) mosaic.at<float>(y, x) = rgb.at<cv::Vec3f>(y, x)[colour(y, x)];
+  cv::Mat out(rows, cols, CV_32FC3);
+  tbb::parallel_for(0, rows, [&](int y) {
+    for (int x = 0; x < cols; ++x) {
+      float sum[3] = {0, 0, 0};
+      int count[3] = {0, 0, 0};
+      const int own = colour(y, x);
+      for (int dy = -1; dy <= 1; ++dy) {
+        const int yy = y + dy;
+        if (yy < 0 || yy >= rows) continue;
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx;
+          if (xx < 0 || xx >= cols) continue;
+          const int c = colour(yy, xx);
+          if (c == own && (dx != 0 || dy != 0)) continue;  // a site's own colour: its own value
+          sum[c] += mosaic.at<float>(yy, xx);
+          ++count[c];
+        }
+      }
+      for (int c = 0; c < 3; ++c) out.at<cv::Vec3f>(y, x)[c] = count[c] ? sum[c] / count[c] : 0.0f;
+    }
+  });
+  return out;
 }
 
 // The geometry both the capture's and the truth's figures use.
@@ -554,18 +633,29 @@ Metrics measureCapture(const fs::path& folder, const fs::path& model_file, const
       in.known.setTo(255, fill);
     }
   });
-  // The light's pattern on these images, at the lights' centres.
+  // The light's pattern on these images, at the lights' centres (those measured).
   auto patternOf = [&](const std::vector<FrameInput>& images) {
     std::vector<const cv::Mat*> lums;
     std::vector<cv::Point2d> centres;
     for (size_t i = 0; i < n; ++i)
-      if (g.lights[i].found) {
+      if (g.lights[i].found && g.centre_error_px[i] <= 0.3) {
         lums.push_back(&images[i].lum);
         centres.push_back(g.lights[i].center);
       }
     const fit::LightPatternOptions o = fit::FlareFitterOptions().light_pattern;
     return measurePattern(lums, centres, o.radius_px, o.percentile, o.min_frames);
   };
+
+  // The lights nothing measured, placed by the pattern.
+  if (m.light.peak > 0) {
+    const SubpixelPattern pattern = patternOf(inputs);
+    tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+      if (!g.lights[i].found || g.centre_error_px[i] <= 0.3) return;
+      g.lights[i].center = registerLight(pattern, inputs[i].lum, inputs[i].known, g.lights[i].center,
+                                         1e-7 * m.light.peak);
+      g.centre_error_px[i] = 0.3;
+    });
+  }
 
   auto fillSeries = [&](Series& series, const std::vector<FrameInput>& images, const LightReference& reference) {
     const SubpixelPattern pattern = patternOf(images);
@@ -604,12 +694,15 @@ Metrics measureCapture(const fs::path& folder, const fs::path& model_file, const
                              "frames): the flux there is a lower bound");
 
   // The truth: the same figures on the noise-free images, and the ghosts alone.
+  const bool colour_sensor = extras.cfa != "mono";
   if (stack.has_truth) {
     std::vector<FrameInput> truth(n);
     std::vector<std::vector<fit::GhostTruth>> ghosts(n);
     tbb::parallel_for(size_t{0}, n, [&](size_t i) {
       cv::Mat image, valid;
       fit::readFrameImage(stack.frames[i].truth_file, "", image, valid);
+      // A colour sensor's frames are its mosaic demosaiced: the truth is seen alike.
+      if (colour_sensor && image.channels() == 3) image = throughCfa(image, extras.cfa);
       truth[i].lum = luminance(image).clone();
       truth[i].known = cv::Mat(stack.size, CV_8U, cv::Scalar(255));
       truth[i].direct = stack.frames[i].valid.clone();
@@ -648,9 +741,16 @@ Metrics measureCapture(const fs::path& folder, const fs::path& model_file, const
         const double p = boxPeak(sum, valid, options.peak_box_px);
         if (p > 0 && m.truth_light.peak > 0) f.ghost_layers_peak_stops = std::log2(p / m.truth_light.peak);
       }
-      const LightSpot s = measureLightSpot(truth[i].lum);
-      if (s.whole() && m.truth_light.flux > 0) f.light_flux_ratio = s.flux / m.truth_light.flux;
+      // The light's own flux where the capture measured it whole (a noise-free truth would take a
+      // ghost for a light beyond the frame).
+      if (spots[i].whole() && m.truth_light.flux > 0) {
+        const LightSpot s = measureLightSpot(truth[i].lum);
+        if (s.whole()) f.light_flux_ratio = s.flux / m.truth_light.flux;
+      }
     }
+    if (colour_sensor)
+      m.truth.notes.push_back("a " + extras.cfa + " sensor: the truth seen through its colour filter array and the "
+                              "frames' bilinear demosaic, as the frames are (the ghosts alone: their own layers)");
     m.truth.notes.push_back("the same figures on truth/'s noise-free images, with the capture's geometry; ghost flux "
                             "from the per-ghost truth layers; visible: a true ghost's peak above " +
                             fmt(options.visible_factor) + " × the frame's noise σ");
