@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -139,6 +140,8 @@ std::string CaptureSummary::BriefReport() const {
 }
 
 namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 std::string frameName(int index) {
   char buf[32];
@@ -589,14 +592,21 @@ void Session::updateLightStability() {
   std::sort(frames.begin(), frames.end(),
             [](const Json& a, const Json& b) { return a["index"] < b["index"]; });
   for (const Json& f : frames) {
-    const Json* l = f.contains("light") ? &f["light"] : nullptr;
-    if (!l) continue;
-    if (l->value("saturated_photosites", 0LL) > 0) clipped = true;
-    if (!l->value("found", false) || l->value("cut", true) || l->value("saturated_photosites", 0LL) > 0)
-      continue;
+    // Frames of a resumed session are as their manifest said: only well-formed entries count.
+    const Json* l = f.contains("light") && f["light"].is_object() ? &f["light"] : nullptr;
+    if (!l || !f["angle_deg"].is_number()) continue;
+    const auto number = [&](const char* key) {
+      return l->contains(key) && (*l)[key].is_number() ? (*l)[key].get<double>() : kNaN;
+    };
+    const auto flag = [&](const char* key, bool fallback) {
+      return l->contains(key) && (*l)[key].is_boolean() ? (*l)[key].get<bool>() : fallback;
+    };
+    const double saturated = number("saturated_photosites"), flux = number("flux");
+    if (saturated > 0) clipped = true;
+    if (!flag("found", false) || flag("cut", true) || !(saturated == 0) || !std::isfinite(flux)) continue;
     if (reference < 0) reference = f["index"].get<int>();
     angles.push_back(f["angle_deg"].get<double>());
-    fluxes.push_back((*l)["flux"].get<double>());
+    fluxes.push_back(flux);
   }
   Json st = {{"frames", static_cast<int>(fluxes.size())},
              {"reference_frame_index", reference < 0 ? Json() : Json(reference)},
@@ -761,13 +771,18 @@ CaptureSummary Session::run() {
     }
     // The light check's start, taken at a frame of the stopped session.
     if (const auto check = root.find("light_check"); check && check->isObject() && !plan_.light_exposures_s.empty()) {
+      // Each field read with its type, so that a damaged manifest is named, not half used.
       const long long index = (*check)["frame_index"].integer();
       const ConfigNode start = (*check)["start"];
+      const Json fluxes = start["fluxes"].numbers();
       if (index >= 0 && index < static_cast<long long>(angles_.size()))
         manifest_["light_check"] = {{"frame_index", index},
                                     {"angle_deg", angles_[index]},
                                     {"repeats", (*check)["repeats"].integer()},
-                                    {"start", start.json()}};
+                                    {"start", {{"flux", start["flux"].number()},
+                                               {"peak", start["peak"].number()},
+                                               {"saturated_photosites", start["saturated_photosites"].integer()},
+                                               {"fluxes", fluxes}}}};
     }
     const ConfigNode frames = root["frames"];
     for (size_t k = 0; k < frames.size(); ++k) {

@@ -178,11 +178,11 @@ void drawCurves(cv::Mat& image, const PlotPanel& panel, const std::vector<Curve>
 }
 
 // Each input's worst angle (largest value of its capture curve, else its first curve), ringed and
-// named.
+// named above the panel's title line, right-aligned (inside the panel it would hide points).
 void markWorst(cv::Mat& image, const PlotPanel& panel, const std::vector<Curve>& cs,
                const std::vector<Metrics>& inputs, bool largest = true) {
-  int row = 0;
-  for (size_t k = 0; k < inputs.size(); ++k) {
+  int right = panel.area.x + panel.area.width;
+  for (size_t k = inputs.size(); k-- > 0;) {
     const Curve* best = nullptr;
     for (const auto& c : cs)
       if (c.input == static_cast<int>(k) && (!best || (best->source != "capture" && c.source == "capture"))) best = &c;
@@ -199,8 +199,11 @@ void markWorst(cv::Mat& image, const PlotPanel& panel, const std::vector<Curve>&
     cv::circle(image, p, 8, colour, 2, cv::LINE_AA);
     std::ostringstream s;
     s << inputs[k].name << ": worst at " << std::setprecision(3) << bx << " deg";
-    const cv::Point at(panel.area.x + 8, panel.area.y + 16 + 16 * row++);
-    text(image, s.str(), at, 0.42, colour);
+    int baseline = 0;
+    const int width = cv::getTextSize(s.str(), cv::FONT_HERSHEY_SIMPLEX, 0.42, 1, &baseline).width;
+    right -= width;
+    text(image, s.str(), {right, panel.area.y - 24}, 0.42, colour);
+    right -= 18;
   }
 }
 
@@ -328,10 +331,21 @@ cv::Mat ghostFluxPlot(const std::vector<Metrics>& inputs) {
   }
   for (size_t p = 0; p < panels.size(); ++p) {
     const auto& [m, s] = panels[p];
+    // The brightest ghosts (by their largest flux over θ): a lens has hundreds, most faint.
+    constexpr size_t kShown = 10;
+    std::map<int, double> brightest;
+    for (const auto& f : s->frames)
+      for (const auto& [id, v] : f.ghost_flux) brightest[id] = std::max(brightest[id], v);
+    std::vector<std::pair<double, int>> order;
+    for (const auto& [id, v] : brightest) order.emplace_back(-v, id);
+    std::sort(order.begin(), order.end());
+    std::set<int> shown;
+    for (size_t k = 0; k < std::min(kShown, order.size()); ++k) shown.insert(order[k].second);
     std::map<int, std::vector<std::pair<double, double>>> by_id;
     double y0 = kNaN, y1 = kNaN;
     for (const auto& f : s->frames)
       for (const auto& [id, v] : f.ghost_flux) {
+        if (!shown.count(id)) continue;
         const double y = v > 0 ? std::log10(v) : kNaN;
         by_id[id].emplace_back(f.angle_deg, y);
         if (std::isfinite(y)) {
@@ -340,14 +354,17 @@ cv::Mat ghostFluxPlot(const std::vector<Metrics>& inputs) {
         }
       }
     if (!std::isfinite(y0)) continue;
-    // Up to nine decades below the brightest: fainter ghosts crowd the bottom.
-    y0 = std::max(std::floor(y0), std::ceil(y1) - 9);
+    // Up to five decades below the brightest: where a ghost leaves, its flux dives.
+    y0 = std::max(std::floor(y0), std::ceil(y1) - 5);
     const PlotPanel panel{cv::Rect(70, 40 + static_cast<int>(p) * h, 860, h - 60), xr.x0, xr.x1, y0,
                           std::max(std::ceil(y1), y0 + 1)};
     const bool relative = m->kind == "capture";
     panel.drawAxes(image,
                    m->name + " (" + s->source + "): each ghost's flux" +
-                       (relative ? " / the light's flux" : ", the model's units"),
+                       (relative ? " / the light's flux" : ", the model's units") +
+                       (order.size() > kShown ? " (the " + std::to_string(kShown) + " brightest of " +
+                                                    std::to_string(order.size()) + ")"
+                                              : std::string()),
                    p + 1 == panels.size(), true);
     int k = 0;
     for (const auto& [id, pts] : by_id) {
@@ -382,15 +399,23 @@ cv::Mat lightPlot(const std::vector<Metrics>& inputs) {
   spec.sources = {"capture", "truth"};
   cv::Mat image = singlePlot(inputs, spec);
   if (image.empty()) return image;
-  int row = 0;
+  // The stability figures under the legend.
+  std::vector<std::pair<std::string, int>> lines;
   for (size_t k = 0; k < inputs.size(); ++k) {
     const LightStability& st = inputs[k].trust.light;
     if (!st.recorded) continue;
     std::ostringstream s;
-    s << inputs[k].name << ": drift " << (std::isfinite(st.drift_pct) ? num(st.drift_pct, 3) + " %" : "not measured")
-      << ", scatter " << (std::isfinite(st.scatter_pct) ? num(st.scatter_pct, 3) + " %" : "not measured");
-    text(image, s.str(), {78, 56 + 16 * row++}, 0.42, plotSeriesColour(static_cast<int>(k)));
+    s << inputs[k].name << ": the light's drift over the capture "
+      << (std::isfinite(st.drift_pct) ? num(st.drift_pct, 3) + " %" : "not measured") << " (light check at frame "
+      << st.reference_frame_index << "), scatter from frame to frame "
+      << (std::isfinite(st.scatter_pct) ? num(st.scatter_pct, 3) + " %" : "not measured");
+    lines.emplace_back(s.str(), static_cast<int>(k));
   }
+  cv::Mat taller(image.rows + 20 * static_cast<int>(lines.size()) + 6, image.cols, CV_8UC3, kWhite);
+  image.copyTo(taller(cv::Rect(0, 0, image.cols, image.rows)));
+  for (size_t k = 0; k < lines.size(); ++k)
+    text(taller, lines[k].first, {70, image.rows + 14 + 20 * static_cast<int>(k)}, 0.45, plotSeriesColour(lines[k].second));
+  image = taller;
   return image;
 }
 
@@ -424,7 +449,7 @@ std::string metricsHtml(const std::vector<Metrics>& inputs, const std::vector<st
     o << "<table>\n<tr><th>lens</th><td>" << html(m.lens) << ", f/" << num(m.f_number, 3) << ", " << m.size.width
       << "×" << m.size.height << " px</td></tr>\n";
     if (m.kind == "capture") {
-      o << "<tr><th>the light (normaliser)</th><td>" << html(m.light.method) << ": " << html(m.light.description)
+      o << "<tr><th>the light (normaliser)</th><td>" << html(m.light.description.empty() ? m.light.method : m.light.description)
         << "; flux " << num(m.light.flux) << ", peak " << num(m.light.peak) << " (" << html(m.units) << ")"
         << (m.light.lower_bound ? " <span class=\"warn\">lower bounds</span>" : "") << "</td></tr>\n";
       if (!m.truth.empty())
@@ -436,7 +461,8 @@ std::string metricsHtml(const std::vector<Metrics>& inputs, const std::vector<st
       o << "<tr><th>light stability</th><td>";
       if (t.light.recorded)
         o << "drift " << (std::isfinite(t.light.drift_pct) ? num(t.light.drift_pct, 3) + " %" : "not measured")
-          << " (frame " << t.light.reference_frame_index << " re-measured at the end), scatter "
+          << " (the light check at frame " << t.light.reference_frame_index << ", measured after it and again after the "
+             "last frame), scatter "
           << (std::isfinite(t.light.scatter_pct) ? num(t.light.scatter_pct, 3) + " %" : "not measured") << " over "
           << t.light.frames << " frames"
           << (t.light.warning.empty() ? "" : " <span class=\"warn\">" + html(t.light.warning) + "</span>");
