@@ -32,7 +32,8 @@ void registerMetrics(CLI::App& app) {
   cmd->add_option("INPUT", o->inputs, "Capture folders (manifest.json) or flare-model files")->required();
   cmd->add_option("--model", o->models,
                   "A fitted model of a capture input, for each ghost's flux over θ; repeat it for "
-                  "several captures (the k-th --model goes with the k-th capture)");
+                  "several captures (the k-th --model goes with the k-th capture)")
+      ->allow_extra_args(false);  // one file per --model: the inputs after it stay inputs
   cmd->add_option("--out", o->out, "Folder for the files")->required();
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   cmd->callback([o] {
