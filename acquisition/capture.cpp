@@ -185,7 +185,7 @@ class Session {
   // mean flux and peak, the fluxes' spread, clipped photosites.
   Json measureLightRepeatedly(int index, double angle_deg, int first_take);
   // The light check's start, at the first frame that shows the whole light (right after it).
-  void startLightCheck(int index, double angle_deg, const Json& light);
+  void startLightCheck(int index, double angle_deg);
   // The light check's end, back at that frame's angle after the last frame; the drift.
   void checkLight();
   void updateLightStability();
@@ -509,7 +509,7 @@ void Session::captureFrame(int index, double angle_deg) {
   if (!light.is_null()) entry["light"] = light;
   if (!light.is_null() && !manifest_.contains("light_check") && light["found"].get<bool>() &&
       !light["cut"].get<bool>() && light["saturated_photosites"].get<long long>() == 0)
-    startLightCheck(index, angle_deg, light);
+    startLightCheck(index, angle_deg);
 
   if (plan_.keep_raw) {
     createFolder(out_ / "raw");
@@ -687,8 +687,7 @@ Json Session::measureLightRepeatedly(int index, double angle_deg, int first_take
           {"fluxes", fluxes}};
 }
 
-void Session::startLightCheck(int index, double angle_deg, const Json& light) {
-  (void)light;
+void Session::startLightCheck(int index, double angle_deg) {
   manifest_["light_check"] = {{"frame_index", index},
                               {"angle_deg", angle_deg},
                               {"repeats", plan_.light_check_repeats},

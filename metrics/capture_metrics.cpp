@@ -11,7 +11,6 @@
 #include "common/error.h"
 #include "common/exr.h"
 #include "common/image.h"
-#include "common/input_file.h"
 #include "common/light_spot.h"
 #include "fit/cost.h"
 #include "fit/flare_fitter.h"
@@ -131,7 +130,7 @@ cv::Mat discMask(cv::Size size, cv::Point2d c, double radius) {
 }
 
 // The largest mean over peak_box² boxes wholly inside `valid` (-1 without any).
-double boxPeak(const cv::Mat& image, const cv::Mat& valid, int peak_box, cv::Point* where = nullptr) {
+double boxPeak(const cv::Mat& image, const cv::Mat& valid, int peak_box) {
   cv::Mat box;
   cv::blur(image, box, cv::Size(peak_box, peak_box), cv::Point(-1, -1), cv::BORDER_REPLICATE);
   cv::Mat valid_f, valid_box;
@@ -142,10 +141,7 @@ double boxPeak(const cv::Mat& image, const cv::Mat& valid, int peak_box, cv::Poi
     const float* b = box.ptr<float>(y);
     const float* v = valid_box.ptr<float>(y);
     for (int x = 0; x < image.cols; ++x)
-      if (v[x] > 0.999f && b[x] > peak) {
-        peak = b[x];
-        if (where) *where = {x, y};
-      }
+      if (v[x] > 0.999f && b[x] > peak) peak = b[x];
   }
   return peak;
 }
@@ -298,7 +294,6 @@ struct Geometry {
   // frame's clipped core, or placed by the optical zero's curve beyond the frame's edge.
   std::vector<double> centre_error_px;
   double core_radius_px = 0;
-  const fit::FitResult* fit = nullptr;
 };
 
 // The figures of one frame image `lum` (luminance) given the light reference; `valid` marks the
@@ -524,7 +519,6 @@ Metrics measureCapture(const fs::path& folder, const fs::path& model_file, const
 
   // Where the light is: the light exposure's spot, else the fitter's.
   Geometry g;
-  g.fit = &geom;
   g.lights = geom.horizon.lights;
   g.centre_error_px.assign(n, 1.0);
   for (size_t i = 0; i < n; ++i) {
