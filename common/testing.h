@@ -4,7 +4,10 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
+#include <map>
 #include <random>
+#include <sstream>
 #include <string>
 
 namespace flarekit::testing {
@@ -30,5 +33,18 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+// Every file under `dir` (recursively): its path relative to `dir` and its bytes.
+inline std::map<std::string, std::string> filesUnder(const std::filesystem::path& dir) {
+  std::map<std::string, std::string> out;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    std::ifstream in(e.path(), std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    out[std::filesystem::relative(e.path(), dir).string()] = s.str();
+  }
+  return out;
+}
 
 }  // namespace flarekit::testing

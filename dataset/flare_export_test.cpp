@@ -22,6 +22,7 @@ namespace flarekit::dataset {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::filesUnder;
 using testing::TempDir;
 
 const std::string kData = std::string(FLAREKIT_SOURCE_DIR) + "/tests/data/";
@@ -40,18 +41,6 @@ ExportOptions smallSet(long long count) {
 }
 
 // Every file under `dir` (relative path → content), for comparing sets byte for byte.
-std::map<std::string, std::string> filesUnder(const fs::path& dir) {
-  std::map<std::string, std::string> out;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    std::ifstream in(e.path(), std::ios::binary);
-    std::ostringstream s;
-    s << in.rdbuf();
-    out[fs::relative(e.path(), dir).string()] = s.str();
-  }
-  return out;
-}
-
 std::string readText(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   std::ostringstream s;

@@ -44,12 +44,12 @@ namespace flarekit {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::lineCount;
 using testing::runFlarekit;
 using testing::TempDir;
 
 const fs::path kSource = FLAREKIT_SOURCE_DIR;
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 // A small simulated rig (fast captures) with optional extra TOML (e.g. a [faults] section).
 fs::path writeSmallRig(const TempDir& dir, const std::string& name, const std::string& extra = "",

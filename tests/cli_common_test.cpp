@@ -17,11 +17,11 @@
 namespace flarekit {
 namespace {
 
+using testing::lineCount;
 using testing::runFlarekit;
 using testing::runProgram;
 using testing::TempDir;
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 TEST(Cli, VersionAndHelp) {
   auto v = runFlarekit({"--version"});

@@ -18,25 +18,14 @@ namespace flarekit {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::lineCount;
 using testing::runFlarekit;
+using testing::filesUnder;
 using testing::TempDir;
 
 const std::string kNikon = std::string(FLAREKIT_SOURCE_DIR) + "/tests/data/view/nikon_model.json";
 const std::string kHeliar = std::string(FLAREKIT_SOURCE_DIR) + "/tests/data/view/demo_model.json";
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
-
-std::map<std::string, std::string> filesUnder(const fs::path& dir) {
-  std::map<std::string, std::string> out;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    std::ifstream in(e.path(), std::ios::binary);
-    std::ostringstream s;
-    s << in.rdbuf();
-    out[fs::relative(e.path(), dir).string()] = s.str();
-  }
-  return out;
-}
 
 std::vector<std::string> exportArgs(const fs::path& out, const std::string& count) {
   return {"-q", "export-flares", kNikon, kHeliar, "--count", count, "--size", "96x64", "--seed", "11",

@@ -22,10 +22,10 @@ namespace flarekit {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::lineCount;
 using testing::runFlarekit;
 using testing::TempDir;
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 // Two ghosts moving along the horizon as θ grows, like a pan rig's.
 std::vector<model::GhostParameters> ghostsAt(double theta) {

@@ -22,12 +22,12 @@ namespace flarekit {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::lineCount;
 using testing::runFlarekit;
 using testing::TempDir;
 
 const fs::path kSource = FLAREKIT_SOURCE_DIR;
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 // sim-heliar at 160×107 with the capture-trust keys: two light exposures (the shortest keeps the
 // light's core unclipped, the second measures its spread that 0.25 s clips), a light that drifts

@@ -18,12 +18,12 @@
 namespace flarekit {
 namespace {
 
+using testing::lineCount;
 using testing::runFlarekit;
 using testing::TempDir;
 
 const std::string kExample = std::string(FLAREKIT_SOURCE_DIR) + "/tests/data/model/example_model.json";
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 TEST(CliModel, RenderWritesTheModelImageWithMetadataAndPreview) {
   TempDir dir;

@@ -20,6 +20,7 @@ namespace flarekit {
 namespace {
 
 using nlohmann::json;
+using testing::lineCount;
 using testing::runFlarekit;
 using testing::runProgram;
 using testing::TempDir;
@@ -30,7 +31,6 @@ const std::filesystem::path kSource = FLAREKIT_SOURCE_DIR;
 const std::filesystem::path kModel = kSource / "tests/data/predict/test_model.json";
 const std::filesystem::path kScene = kSource / "predict/examples/stage.json";
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 std::string readFile(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);

@@ -15,6 +15,7 @@
 namespace flarekit {
 namespace {
 
+using testing::lineCount;
 using testing::runFlarekit;
 using testing::TempDir;
 
@@ -22,7 +23,6 @@ std::string lens(const std::string& name) {
   return (std::filesystem::path(FLAREKIT_SOURCE_DIR) / "lenses" / name).string();
 }
 
-int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 TEST(CliRender, LensInfoShowsTheParaxialFacts) {
   auto r = runFlarekit({"lens-info", lens("heliar_tronnier.json")});

@@ -1,6 +1,7 @@
 #pragma once
 // Runs the flarekit binary the way a user would, capturing exit code, stdout and stderr.
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -24,5 +25,8 @@ bool onPath(const std::string& program);
 std::vector<std::string> chromiumArgs(const std::string& profile);
 // The console messages chromium logged for the page ("INFO:CONSOLE(...)" lines of its stderr).
 std::vector<std::string> consoleLines(const std::string& err);
+
+// The number of lines of a command's output (its newlines).
+inline int lineCount(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 }  // namespace flarekit::testing
