@@ -17,6 +17,7 @@
 #include "fit/frames.h"
 #include "model/flare_model.h"
 #include "model/model_renderer.h"
+#include "metrics/light_pattern.h"
 
 namespace flarekit::metrics {
 
@@ -144,110 +145,6 @@ double boxPeak(const cv::Mat& image, const cv::Mat& valid, int peak_box) {
       if (v[x] > 0.999f && b[x] > peak) peak = b[x];
   }
   return peak;
-}
-
-// The light's own image, the same in every frame that shows it and moved with the light: at each
-// offset from the light's centre, a low percentile over those frames keeps it and drops the ghosts
-// (which move at other rates), less what lies at the window's edge (the veils under it). As
-// fit/horizon.h's LightPattern, but sampled and put back at the light's sub-pixel centre
-// (bilinear): a whole-pixel alignment leaves the steep flanks of the light's core behind, as
-// bright as the ghosts beside it, and flips by a pixel where a centre sits on a pixel border.
-struct SubpixelPattern {
-  cv::Mat image;  // CV_32F, (2r + 1)², its centre at the light's centre; empty without one
-  int radius_px = 0;
-
-  // The pattern in a frame of `size` with the light at `c` (0 beyond the pattern).
-  cv::Mat at(cv::Size size, cv::Point2d c) const {
-    if (image.empty()) return cv::Mat::zeros(size, CV_32F);
-    cv::Mat mx(size, CV_32F), my(size, CV_32F);
-    for (int y = 0; y < size.height; ++y)
-      for (int x = 0; x < size.width; ++x) {
-        mx.at<float>(y, x) = static_cast<float>(x + 0.5 - c.x + radius_px);
-        my.at<float>(y, x) = static_cast<float>(y + 0.5 - c.y + radius_px);
-      }
-    cv::Mat out;
-    cv::remap(image, out, mx, my, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
-    return out;
-  }
-};
-
-SubpixelPattern measurePattern(const std::vector<const cv::Mat*>& lums, const std::vector<cv::Point2d>& centres,
-                               int radius_px = 80, double percentile = 0.2, int min_frames = 5) {
-  SubpixelPattern p;
-  if (static_cast<int>(lums.size()) < min_frames) return p;
-  const int side = 2 * radius_px + 1;
-  // Each frame's window about its light, NaN beyond the frame.
-  std::vector<cv::Mat> windows(lums.size());
-  tbb::parallel_for(size_t{0}, lums.size(), [&](size_t k) {
-    cv::Mat mx(side, side, CV_32F), my(side, side, CV_32F);
-    for (int v = 0; v < side; ++v)
-      for (int u = 0; u < side; ++u) {
-        mx.at<float>(v, u) = static_cast<float>(centres[k].x - 0.5 + u - radius_px);
-        my.at<float>(v, u) = static_cast<float>(centres[k].y - 0.5 + v - radius_px);
-      }
-    cv::remap(*lums[k], windows[k], mx, my, cv::INTER_LINEAR, cv::BORDER_CONSTANT,
-              cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
-  });
-  p.image = cv::Mat::zeros(side, side, CV_32F);
-  p.radius_px = radius_px;
-  tbb::parallel_for(0, side, [&](int v) {
-    std::vector<float> samples;
-    for (int u = 0; u < side; ++u) {
-      samples.clear();
-      for (const auto& w : windows) {
-        const float s = w.at<float>(v, u);
-        if (std::isfinite(s)) samples.push_back(s);
-      }
-      if (static_cast<int>(samples.size()) < min_frames) continue;
-      const size_t q = static_cast<size_t>(percentile * (samples.size() - 1));
-      std::nth_element(samples.begin(), samples.begin() + q, samples.end());
-      p.image.at<float>(v, u) = samples[q];
-    }
-  });
-  std::vector<float> edge;
-  for (int k = 0; k < side; ++k)
-    for (float e : {p.image.at<float>(0, k), p.image.at<float>(side - 1, k), p.image.at<float>(k, 0),
-                    p.image.at<float>(k, side - 1)})
-      edge.push_back(e);
-  std::nth_element(edge.begin(), edge.begin() + edge.size() / 2, edge.end());
-  p.image = cv::max(p.image - edge[edge.size() / 2], 0.0f);
-  return p;
-}
-
-// Where the light lies when nothing measured it (beyond the frame's edge, or its core cut): the
-// position along the horizon at which the pattern best matches what the frame shows of the light
-// (its tail over the edge), within ±`reach_px` of `guess`. The fit's curve of the light's centres
-// extrapolates beyond the frame by several pixels, which leaves the light's tail at the edge as
-// bright as a ghost.
-cv::Point2d registerLight(const SubpixelPattern& pattern, const cv::Mat& lum, const cv::Mat& known,
-                          cv::Point2d guess, double floor_value, double reach_px = 24) {
-  if (pattern.image.empty()) return guess;
-  std::vector<cv::Point> pixels;
-  for (int y = 0; y < lum.rows; ++y)
-    for (int x = 0; x < lum.cols; ++x)
-      if (known.at<uchar>(y, x) && lum.at<float>(y, x) > floor_value) pixels.emplace_back(x, y);
-  if (pixels.size() < 16) return guess;
-  auto cost = [&](double dx) {
-    const cv::Mat p = pattern.at(lum.size(), {guess.x + dx, guess.y});
-    double s = 0;
-    for (const auto& q : pixels) {
-      const double d = std::log(lum.at<float>(q)) - std::log(std::max<double>(p.at<float>(q), floor_value));
-      s += d * d;
-    }
-    return s;
-  };
-  auto search = [&](double from, double to, double step) {
-    double best = from, best_cost = std::numeric_limits<double>::infinity();
-    for (double dx = from; dx <= to + 1e-9; dx += step)
-      if (const double c = cost(dx); c < best_cost) {
-        best_cost = c;
-        best = dx;
-      }
-    return best;
-  };
-  double dx = search(-reach_px, reach_px, 1.0);
-  dx = search(dx - 1, dx + 1, 0.1);
-  return {guess.x + dx, guess.y};
 }
 
 // A noise-free R,G,B image as a colour sensor's frames show it: sampled through the colour filter
