@@ -181,6 +181,8 @@ class Session {
   // Takes the light exposures at the head's angle and writes them to `file` (none when empty):
   // their manifest entry. `take` > 0: a light check's k-th photograph at a frame's angle.
   Json takeLightExposure(int index, double angle_deg, const std::string& file, int take = 0);
+  // What an EXR merged from `raws` at `angle_deg` records of the camera, lens and rig.
+  FrameMetadata metadataOf(const std::vector<RawFrame>& raws, double angle_deg) const;
   // plan_.light_check_repeats light exposures at the head's angle (takes first_take, …): their
   // mean flux and peak, the fluxes' spread, clipped photosites.
   Json measureLightRepeatedly(int index, double angle_deg, int first_take);
@@ -399,6 +401,22 @@ void Session::applyLightDrift(int index) {
   sim_camera_->setLightScale(1.0 + rig_.simulation.light_drift_pct / 100.0 * progress);
 }
 
+FrameMetadata Session::metadataOf(const std::vector<RawFrame>& raws, double angle_deg) const {
+  FrameMetadata meta;
+  meta.angle_deg = angle_deg;
+  meta.has_angle = true;
+  for (const auto& r : raws) meta.exposures_s.push_back(r.exposure_s);
+  meta.iso = raws[0].iso > 0 ? raws[0].iso : plan_.iso;
+  meta.f_number = raws[0].f_number > 0 ? raws[0].f_number : plan_.f_number;
+  meta.camera = raws[0].camera;
+  meta.lens = lens_name_;
+  meta.rig = rig_.name;
+  meta.pixel_pitch_um = pixel_pitch_um_;
+  meta.focal_length_mm = focal_length_mm_;
+  meta.units = manifest_["image"]["units"].get<std::string>();
+  return meta;
+}
+
 Json Session::takeLightExposure(int index, double angle_deg, const std::string& file, int take) {
   const double nd = plan_.light_nd_factor;
   std::vector<RawFrame> raws;
@@ -418,18 +436,7 @@ Json Session::takeLightExposure(int index, double angle_deg, const std::string& 
   }
   // Merged as the frames are (demosaiced alike), then times what the filter took.
   MergeResult merged = mergeBracket(raws, merge_);
-  FrameMetadata meta;
-  meta.angle_deg = angle_deg;
-  meta.has_angle = true;
-  for (const auto& r : raws) meta.exposures_s.push_back(r.exposure_s);
-  meta.iso = raws[0].iso > 0 ? raws[0].iso : plan_.iso;
-  meta.f_number = raws[0].f_number > 0 ? raws[0].f_number : plan_.f_number;
-  meta.camera = raws[0].camera;
-  meta.lens = lens_name_;
-  meta.rig = rig_.name;
-  meta.pixel_pitch_um = pixel_pitch_um_;
-  meta.focal_length_mm = focal_length_mm_;
-  meta.units = manifest_["image"]["units"].get<std::string>();
+  const FrameMetadata meta = metadataOf(raws, angle_deg);
   ExrImage exr = mergedToExr(merged, meta);
   if (nd != 1.0) exr.layers.front().image *= nd;
   exr.attributes["flarekit.light_nd_factor"] = nd;
@@ -486,18 +493,7 @@ void Session::captureFrame(int index, double angle_deg) {
     logWarning("frame " + std::to_string(index) + ": " + w);
     summary_.warnings.push_back("frame " + std::to_string(index) + ": " + w);
   }
-  FrameMetadata meta;
-  meta.angle_deg = angle_deg;
-  meta.has_angle = true;
-  for (const auto& f : bracket) meta.exposures_s.push_back(f.exposure_s);
-  meta.iso = bracket[0].iso > 0 ? bracket[0].iso : plan_.iso;
-  meta.f_number = bracket[0].f_number > 0 ? bracket[0].f_number : plan_.f_number;
-  meta.camera = bracket[0].camera;
-  meta.lens = lens_name_;
-  meta.rig = rig_.name;
-  meta.pixel_pitch_um = pixel_pitch_um_;
-  meta.focal_length_mm = focal_length_mm_;
-  meta.units = manifest_["image"]["units"].get<std::string>();
+  const FrameMetadata meta = metadataOf(bracket, angle_deg);
   Json entry = {{"index", index},
                 {"angle_deg", angle_deg},
                 {"file", "frames/" + name + ".exr"},
