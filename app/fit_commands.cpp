@@ -69,8 +69,8 @@ void registerFit(CLI::App& app) {
   struct Options {
     StackArgs stack;
     std::string out, optimizer = "ceres", holdout, report;
-    int threads = 2, frame_stride = 2;
-    double edge_weight = -1;
+    int threads = 2;
+    double edge_weight = -1, frame_step_deg = fit::FlareFitterOptions{}.frame_step_deg;
     bool refine = false, pedestal = true;
   };
   auto o = std::make_shared<Options>();
@@ -87,7 +87,9 @@ void registerFit(CLI::App& app) {
                   "Folder for the summary, the sweep picture, each ghost's frame fits and contact sheets");
   cmd->add_option("--threads", o->threads, "Threads (default 2)");
   cmd->add_option("--edge-weight", o->edge_weight, "λ, the edge term's weight (default 1)");
-  cmd->add_option("--frame-stride", o->frame_stride, "Fit every n-th frame one by one (default 2)");
+  cmd->add_option("--frame-step", o->frame_step_deg,
+                  "Fit frames one by one this many degrees apart (every frame of a coarser capture)")
+      ->capture_default_str();
   cmd->add_flag("--refine,!--no-refine", o->refine,
                 "Also refine the polynomials against the frames themselves in one Ceres problem (off by default: see docs/fitting.md)");
   cmd->add_flag("--pedestal,!--no-pedestal", o->pedestal,
@@ -99,7 +101,7 @@ void registerFit(CLI::App& app) {
     if (!o->holdout.empty() && o->holdout != "odd") throw InputError("--holdout: only \"odd\" is supported");
     options.holdout_odd = o->holdout == "odd";
     options.threads = o->threads;
-    options.frame_stride = o->frame_stride;
+    options.frame_step_deg = o->frame_step_deg;
     if (o->edge_weight >= 0) {
       options.frame_fit.cost.edge_weight = o->edge_weight;
       options.model_fit.cost.edge_weight = o->edge_weight;

@@ -23,7 +23,7 @@ bool FlareFitterOptions::IsValid(std::string* error) const {
     if (error) *error = m;
     return false;
   };
-  if (frame_stride < 1) return fail("fit: frame_stride must be ≥ 1");
+  if (!(frame_step_deg > 0)) return fail("fit: frame_step_deg must be > 0");
   if (threads < 1) return fail("fit: threads must be ≥ 1");
   return true;
 }
@@ -171,7 +171,8 @@ FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
 
   auto t = Clock::now();
   std::vector<int> frames;
-  for (size_t i = 0; i < stack.frames.size(); i += options.frame_stride) frames.push_back(static_cast<int>(i));
+  const size_t stride = std::max(1L, std::lround(options.frame_step_deg / stack.medianStepDeg()));
+  for (size_t i = 0; i < stack.frames.size(); i += stride) frames.push_back(static_cast<int>(i));
   if (options.skip_frame_fit) {
     for (int i : frames) {
       FrameFit f;

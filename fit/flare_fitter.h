@@ -38,8 +38,9 @@ struct FlareFitterOptions {
   ModelFitOptions model_fit;
   // Fit on every other frame only (0, 2, 4, … in angle order), to evaluate on the others.
   bool holdout_odd = false;
-  // Frames fitted one by one in stage 5: every n-th (≥ 1; the model fit measures all).
-  int frame_stride = 2;
+  // Frames fitted one by one in stage 5 are this far apart, degrees (every frame where the
+  // capture's step is coarser; the model fit measures all) (> 0).
+  double frame_step_deg = 0.4;
   // Stage 5 skipped: the model's polynomials go through the candidates' seeds.
   bool skip_frame_fit = false;
   // Threads (≥ 1); the result is the same for any number.

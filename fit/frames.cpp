@@ -133,6 +133,14 @@ int FrameStack::findAngle(double angle_deg) const {
   return -1;
 }
 
+double FrameStack::medianStepDeg() const {
+  std::vector<double> steps;
+  for (size_t i = 1; i < frames.size(); ++i) steps.push_back(frames[i].angle_deg - frames[i - 1].angle_deg);
+  if (steps.empty()) return 1;
+  std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+  return steps[steps.size() / 2];
+}
+
 void readFrameImage(const fs::path& file, const std::string& layer, cv::Mat& image,
                     cv::Mat& valid) {
   if (!fs::exists(file)) throw InputError(file.string(), "frame file is missing");

@@ -48,6 +48,8 @@ struct FrameStack {
 
   // The index in `frames` of the frame at angle θ (within kAngleToleranceDeg), or -1.
   int findAngle(double angle_deg) const;
+  // The median step between successive frames' angles, degrees (1 with fewer than two frames).
+  double medianStepDeg() const;
 };
 
 struct FrameLoadOptions {
