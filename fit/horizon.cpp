@@ -257,7 +257,7 @@ bool OpticalZeroOptions::IsValid(std::string* error) const {
   };
   if (light_terms < 1 || light_terms > 4) return fail("optical zero: light_terms must be 1–4");
   if (ghost_terms < 1 || ghost_terms > 4) return fail("optical zero: ghost_terms must be 1–4");
-  if (!(min_samples_deg > 0)) return fail("optical zero: min_samples_deg must be > 0");
+  if (min_samples < 3) return fail("optical zero: min_samples must be ≥ 3");
   return true;
 }
 
@@ -368,10 +368,8 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
   if (d.light_angles.size() < 4) return zero;
   const int light_terms =
       std::min(options.light_terms, static_cast<int>(d.light_angles.size()) - 2);
-  const double step_deg = stack.medianStepDeg();
   for (const auto& g : ghosts)
-    if (g.angles_deg.size() >= 3 && g.angles_deg.size() * step_deg >= options.min_samples_deg - 1e-9)
-      d.ghosts.push_back(g);
+    if (static_cast<int>(g.angles_deg.size()) >= options.min_samples) d.ghosts.push_back(g);
   zero.ghosts_used = static_cast<int>(d.ghosts.size());
   std::vector<std::vector<double>> weights;
   for (const auto& g : d.ghosts) weights.emplace_back(g.angles_deg.size(), 1.0);

@@ -106,8 +106,7 @@ struct CentreSamples {
 struct OpticalZeroOptions {
   int light_terms = 3;   // odd terms of the light's curve (t, t³, t⁵) (1–4)
   int ghost_terms = 2;   // odd terms of each ghost's centre curve (1–4)
-  double min_samples_deg = 1.6;  // a ghost takes part when its centre samples' count × the
-                                 // capture's step reaches this, degrees (and 3 samples) (> 0)
+  int min_samples = 8;   // a ghost takes part with at least this many centre samples (≥ 3)
 
   bool IsValid(std::string* error) const;
 };
