@@ -40,7 +40,7 @@ struct FlareFitterOptions {
   bool holdout_odd = false;
   // Frames fitted one by one in stage 5 are this far apart, degrees (every frame where the
   // capture's step is coarser; the model fit measures all) (> 0).
-  double frame_step_deg = 0.4;
+  double frame_step_deg = 0.8;
   // Stage 5 skipped: the model's polynomials go through the candidates' seeds.
   bool skip_frame_fit = false;
   // Threads (≥ 1); the result is the same for any number.
