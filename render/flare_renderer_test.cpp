@@ -128,6 +128,28 @@ TEST(FlareRenderer, OpticalAxisOffsetMovesTheWholeFlare) {
   }
 }
 
+// The light's own image (the radiance less every ghost layer), starburst and halo, is centred on
+// light_image_px, where truth frames record the light: on the axis at sub-pixel axis offsets, and
+// off it.
+TEST(FlareRenderer, LightsImageIsCentredOnItsRecordedPosition) {
+  const Lens lens = lensNamed("heliar_tronnier.json");
+  for (const cv::Point2d offset : {cv::Point2d(0, 0), cv::Point2d(0.3, -0.2), cv::Point2d(7.25, -3.5)})
+    for (const LightDirection light : {LightDirection{0, 0}, LightDirection{2.5, 20}})
+      for (const double halo : {0.0, 0.1}) {
+        SCOPED_TRACE(::testing::Message() << "offset " << offset << ", θ " << light.angle_deg << "°, halo " << halo);
+        FlareRenderOptions o = tiny();
+        o.optical_axis_offset_px = offset;
+        o.halo_fraction = halo;
+        const FlareImage f = renderFlare(lens, light, o);
+        cv::Mat own = f.radiance.clone();
+        for (const GhostRecord& g : f.ghosts)
+          if (!g.image.empty()) own -= g.image;
+        const cv::Point2d c = centroidPx(own);
+        EXPECT_NEAR(c.x, f.light_image_px.x, 0.05);
+        EXPECT_NEAR(c.y, f.light_image_px.y, 0.05);
+      }
+}
+
 // A whole-pixel offset gives the same image shifted by whole pixels, away from the borders: the
 // sprites exactly; the tiled rasterizer up to its float vertex positions, which round differently
 // elsewhere on the image (a pixel centre on an edge two triangles share may take either's value).

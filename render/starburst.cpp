@@ -78,9 +78,11 @@ void addStarburst(const cv::Mat& pattern, cv::Point2d center_px, double radius_p
   const double s = cv::sum(sprite)[0];
   if (!(s > 0)) return;
   sprite *= flux_px / s;
-  // The sprite's centre (size/2 in its pixel-edge coordinates) goes to center_px, by an integer
-  // offset plus a bilinear sub-pixel shift.
-  const double ox = center_px.x - size / 2.0, oy = center_px.y - size / 2.0;
+  // The zero frequency (bin n/2, whose centre is at n/2 + 0.5 in the pattern's pixel-edge
+  // coordinates, size/n sprite pixels per bin) goes to center_px, by an integer offset plus a
+  // bilinear sub-pixel shift.
+  const double zero = (n / 2 + 0.5) * size / n;
+  const double ox = center_px.x - zero, oy = center_px.y - zero;
   const int ix = static_cast<int>(std::floor(ox)), iy = static_cast<int>(std::floor(oy));
   const float fx = static_cast<float>(ox - ix), fy = static_cast<float>(oy - iy);
   const float w[2][2] = {{(1 - fx) * (1 - fy), fx * (1 - fy)}, {(1 - fx) * fy, fx * fy}};

@@ -71,5 +71,43 @@ TEST(Starburst, ABandOfWavelengthsBlursOutTheRingingOfOne) {
   EXPECT_TRUE(starburstBand(one, {}, &scale_nm).empty());
 }
 
+// Centroid of channel 0 of a CV_32FC3 image (pixel centres at i + 0.5).
+cv::Point2d centroidPx(const cv::Mat& image) {
+  double sum = 0, sx = 0, sy = 0;
+  for (int y = 0; y < image.rows; ++y)
+    for (int x = 0; x < image.cols; ++x) {
+      const double v = image.at<cv::Vec3f>(y, x)[0];
+      sum += v;
+      sx += v * (x + 0.5);
+      sy += v * (y + 0.5);
+    }
+  return {sx / sum, sy / sum};
+}
+
+// The starburst is the light's image: its centroid (the zero frequency, the pattern being point
+// symmetric about it) lies on the light's image position whatever that position's sub-pixel offset,
+// for each wavelength band's scale. Radii as on the simulated rig (a 320×214 frame's diagonal / 8
+// at 550 nm) and wider.
+TEST(Starburst, CentroidLiesOnTheLightsImagePosition) {
+  const cv::Mat pattern = starburstPattern(Aperture(ApertureShape{}), 256);
+  for (int s = 0; s < 3; ++s) {
+    double scale_nm = 0;
+    const cv::Mat band = starburstBand(pattern, sampleBand(0, s), &scale_nm);
+    for (const double radius_550 : {std::hypot(320.0, 214.0) / 8, 100.0}) {
+      const double radius = radius_550 * scale_nm / 550.0;
+      for (const cv::Point2d at : {cv::Point2d(200.0, 200.0), cv::Point2d(200.37, 199.81),
+                                   cv::Point2d(199.5, 200.25)}) {
+        cv::Mat image(400, 400, CV_32FC3, cv::Scalar::all(0));
+        addStarburst(band, at, radius, 1.0, cv::Vec3f(1, 1, 1), &image);
+        const cv::Point2d c = centroidPx(image);
+        SCOPED_TRACE(::testing::Message() << "band " << s << ", radius " << radius << " px, at " << at);
+        EXPECT_NEAR(cv::sum(image)[0], 1.0, 1e-4);
+        EXPECT_NEAR(c.x, at.x, 0.05);
+        EXPECT_NEAR(c.y, at.y, 0.05);
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace flarekit::render
