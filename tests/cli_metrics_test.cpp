@@ -149,7 +149,9 @@ TEST(CliMetricsColour, BayerCaptureAgreesWithItsTruth) {
   EXPECT_LT(a["ghost_peak_stops_max"].get<double>(), 0.2);
   EXPECT_LT(a["light_peak_stops"].get<double>(), 0.2);
   const double drift = in["trust"]["light_stability"]["drift_pct"].get<double>();
-  EXPECT_LT(std::abs(drift), 0.5);
+  // A steady light: its drift is only the noise of the light check's repeated exposures, bounded
+  // at about three of its standard deviations.
+  EXPECT_LT(std::abs(drift), 1.5);
   std::printf("[ figures  ] RGGB: flare flux ratio within %.2f %% of the truth's (11 frames, median %.2f %%), ghost "
               "peak within %.3f stops, light flux %.2f %%, light peak %.4f stops; a steady light's drift %.2f %%\n",
               100 * a["flare_flux_rel_max"].get<double>(), 100 * a["flare_flux_rel_median"].get<double>(),
