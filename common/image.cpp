@@ -16,7 +16,7 @@ cv::Mat luminance(const cv::Mat& image) {
   if (image.type() == CV_32FC1) return image;
   CV_Assert(image.type() == CV_32FC3);
   cv::Mat y;
-  cv::transform(image, y, cv::Matx13f(0.2126f, 0.7152f, 0.0722f));
+  cv::transform(image, y, cv::Matx13f(kLuminanceR, kLuminanceG, kLuminanceB));
   return y;
 }
 

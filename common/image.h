@@ -9,8 +9,17 @@
 
 namespace flarekit {
 
+// Rec. 709 luminance weights of linear R, G, B.
+inline constexpr double kLuminanceR = 0.2126, kLuminanceG = 0.7152, kLuminanceB = 0.0722;
+
 // Rec. 709 luminance of a CV_32FC3 (R,G,B) image; a CV_32FC1 image is returned as is.
 cv::Mat luminance(const cv::Mat& image);
+
+// Rec. 709 luminance of `channels` values (1: the value itself, 3: R, G, B).
+inline double luminance(const double* values, int channels) {
+  return channels == 3 ? kLuminanceR * values[0] + kLuminanceG * values[1] + kLuminanceB * values[2]
+                       : values[0];
+}
 
 struct PreviewOptions {
   // Exposure adjustment in stops on top of the automatic exposure (0 = automatic only).

@@ -77,10 +77,8 @@ FrameFit fitOneFrame(const FrameStack& stack, int index, const LightImage& light
   auto grey = [](const model::GhostParameters& g) {
     model::GhostParameters one = g;
     one.channels = 1;
-    if (g.channels == 3) {
-      one.border = {0.2126 * g.border[0] + 0.7152 * g.border[1] + 0.0722 * g.border[2], 0, 0};
-      one.inside = {0.2126 * g.inside[0] + 0.7152 * g.inside[1] + 0.0722 * g.inside[2], 0, 0};
-    }
+    one.border = {luminance(g.border.data(), g.channels), 0, 0};
+    one.inside = {luminance(g.inside.data(), g.channels), 0, 0};
     return one;
   };
   for (int sweep = 0; sweep < o.sweeps; ++sweep) {

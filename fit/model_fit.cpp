@@ -1,5 +1,7 @@
 #include "fit/model_fit.h"
 
+#include "common/image.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -617,8 +619,9 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   sum.seconds_refine = since(t_refine);
 
   // 3. Each ghost's range ends where it draws nothing the frames can show: its brightest value
-  // (Ib or Ii, in any channel) below min_peak_sigma × the frame's noise σ (measured at
-  // kNoiseBlockPx, as a mono and an RGGB sensor show it alike). The shades decide where a ghost
+  // (Ib or Ii, in luminance, as the outlines are fitted and fit-eval counts a ghost visible)
+  // below min_peak_sigma × the frame's noise σ (measured at kNoiseBlockPx, as a mono and an RGGB
+  // sensor show it alike). The shades decide where a ghost
   // is, not the candidates' traces alone: a trace's ghost whose light the others already draw
   // gets shades of about 0 and is no ghost there.
   std::vector<double> noise(fits.size());
@@ -634,8 +637,7 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
       const double angle = m.capture.fieldAngle(fits[i].angle_deg);
       if (!c.covers(angle)) continue;
       const model::GhostParameters q = c.at(angle, channels, c.block.data());
-      double peak = 0;
-      for (int ch = 0; ch < channels; ++ch) peak = std::max({peak, q.border[ch], q.inside[ch]});
+      const double peak = std::max(luminance(q.border.data(), channels), luminance(q.inside.data(), channels));
       lit.emplace_back(angle, peak >= o.min_peak_sigma * noise[i]);
     }
     std::sort(lit.begin(), lit.end());
