@@ -307,14 +307,6 @@ std::optional<BorderModel> fitBorderModel(const SweepImage& s, const ZeroOfPairs
   return m;
 }
 
-// Extends the ghost's frames on either side while `hidden(row)`, by max_hidden_deg at most.
-template <typename Hidden>
-void extendWhileHidden(const SweepImage& s, const CandidateOptions& o, const Hidden& hidden, GhostCandidate& c) {
-  const int most = s.rowsOf(o.max_hidden_deg);
-  for (int k = 0; k < most && c.first_row > 0 && hidden(c.first_row - 1); ++k) --c.first_row;
-  for (int k = 0; k < most && c.last_row + 1 < s.rows() && hidden(c.last_row + 1); ++k) ++c.last_row;
-}
-
 // The ghost centred on a peak trace, over the trace's frames and on while the peak is hidden
 // (beyond the frame, in the light's zone): at each, its half-width and half-height where S − light
 // (the frame's profile through the peak, vertically) falls halfway from the peak to the lowest
@@ -331,7 +323,8 @@ GhostCandidate peakCandidate(const FrameStack& stack, const SweepImage& s, const
     const double x = borderAt(t, s, row, row)[0];
     return x < 0 || x > s.width() || s.inLightZone(row, x);
   };
-  extendWhileHidden(s, o, hidden, c);
+  for (int k = 0; k < o.max_hidden_rows && c.first_row > 0 && hidden(c.first_row - 1); ++k) --c.first_row;
+  for (int k = 0; k < o.max_hidden_rows && c.last_row + 1 < s.rows() && hidden(c.last_row + 1); ++k) ++c.last_row;
   const int n = c.last_row - c.first_row + 1;
   c.left_seen.assign(n, false);
   c.right_seen.assign(n, false);
@@ -430,7 +423,7 @@ bool CandidateOptions::IsValid(std::string* error) const {
   if (!(single_significance > 0)) return fail("candidates: single_significance must be > 0");
   if (!(single_raised_fraction > 0 && single_raised_fraction <= 1))
     return fail("candidates: single_raised_fraction must be in (0, 1]");
-  if (!(max_hidden_deg >= 0)) return fail("candidates: max_hidden_deg must be ≥ 0");
+  if (max_hidden_rows < 0) return fail("candidates: max_hidden_rows must be ≥ 0");
   if (profile_half_columns < 0) return fail("candidates: profile_half_columns must be ≥ 0");
   if (!(min_height_fraction > 0 && min_height_fraction < 1))
     return fail("candidates: min_height_fraction must be in (0, 1)");
@@ -592,7 +585,8 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       }
       return in_frame;
     };
-    extendWhileHidden(s, o, hidden, c);
+    for (int k = 0; k < o.max_hidden_rows && c.first_row > 0 && hidden(c.first_row - 1); ++k) --c.first_row;
+    for (int k = 0; k < o.max_hidden_rows && c.last_row + 1 < s.rows() && hidden(c.last_row + 1); ++k) ++c.last_row;
     const int n = c.last_row - c.first_row + 1;
     std::vector<double> angles(s.angles_deg.begin() + c.first_row, s.angles_deg.begin() + c.last_row + 1);
     // Its borders at every frame: a trace's own curve where it is traced, the border model

@@ -52,7 +52,7 @@ struct CandidateOptions {
   double single_raised_sigma = 3;   // S stays raised above the outside by this many noise σ (≥ 0)
   double single_raised_fraction = 0.5;  // and nowhere by less than this fraction of its step (or
                                         // of its typical rise, where a rim makes that the less)
-  double max_hidden_deg = 6;        // a ghost goes on this far beyond its traces while hidden (≥ 0)
+  int max_hidden_rows = 30;         // a ghost goes on this many frames beyond its traces when hidden
   int profile_half_columns = 2;     // columns averaged on each side of Mx for h (≥ 0)
   double min_height_fraction = 0.3; // h is searched within [this, 1/this] × the half-width
   double seed_outside_falloff_px = 2;  // Fo of the seeds, pixels (> 0)

@@ -156,14 +156,13 @@ bool SweepOptions::IsValid(std::string* error) const {
   if (!(light_percentile > 0 && light_percentile < 1)) return fail("sweep: light_percentile must be in (0, 1)");
   if (!(peak_sigma > 0)) return fail("sweep: peak_sigma must be > 0");
   if (!(gate_px > 0)) return fail("sweep: gate_px must be > 0");
-  if (!(gate_growth_px_per_deg >= 0)) return fail("sweep: gate_growth_px_per_deg must be ≥ 0");
-  if (!(max_slope_px_per_deg > 0)) return fail("sweep: max_slope_px_per_deg must be > 0");
-  if (!(max_gap_deg >= 0)) return fail("sweep: max_gap_deg must be ≥ 0");
-  if (!(min_trace_deg > 0)) return fail("sweep: min_trace_deg must be > 0");
+  if (!(max_slope_px > 0)) return fail("sweep: max_slope_px must be > 0");
+  if (max_gap_rows < 0) return fail("sweep: max_gap_rows must be ≥ 0");
+  if (min_trace_rows < 2) return fail("sweep: min_trace_rows must be ≥ 2");
   if (!(min_significance > 0)) return fail("sweep: min_significance must be > 0");
-  if (!(kink_deg > 0)) return fail("sweep: kink_deg must be > 0");
-  if (!(max_kink_px_per_deg > 0)) return fail("sweep: max_kink_px_per_deg must be > 0");
-  if (!(max_join_gap_deg >= 0)) return fail("sweep: max_join_gap_deg must be ≥ 0");
+  if (kink_rows < 2) return fail("sweep: kink_rows must be ≥ 2");
+  if (!(max_kink_px_per_row > 0)) return fail("sweep: max_kink_px_per_row must be > 0");
+  if (max_join_gap_rows < 0) return fail("sweep: max_join_gap_rows must be ≥ 0");
   if (!(join_tolerance_px > 0)) return fail("sweep: join_tolerance_px must be > 0");
   return true;
 }
@@ -215,7 +214,6 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
   });
   s.angles_deg.resize(rows);
   for (int i = 0; i < rows; ++i) s.angles_deg[i] = stack.frames[i].angle_deg;
-  s.step_deg = stack.medianStepDeg();
 
   std::vector<std::pair<float, float>> all_noise;
   for (auto& n : noise_samples) all_noise.insert(all_noise.end(), n.begin(), n.end());
@@ -345,29 +343,28 @@ struct Growing {
 };
 
 // The trace's position at `row` predicted by a line through its last points, and the gate.
-void predict(const BorderTrace& t, int row, const SweepImage& s, const SweepOptions& o, double* x,
-             double* gate) {
+void predict(const BorderTrace& t, int row, const SweepOptions& o, double* x, double* gate) {
   const int n = static_cast<int>(t.points.size());
-  const double gap_deg = s.angles_deg[row] - s.angles_deg[t.points.back().row];
+  const int gap = row - t.points.back().row;
   if (n == 1) {
     *x = t.points[0].x_px;
-    *gate = o.gate_px + o.max_slope_px_per_deg * gap_deg;
+    *gate = o.gate_px + o.max_slope_px * gap;
     return;
   }
   const int k = std::min(n, 8);
   double sw = 0, st = 0, sx = 0, stt = 0, stx = 0;
   for (int i = n - k; i < n; ++i) {
-    const double a = s.angles_deg[t.points[i].row], v = t.points[i].x_px;
+    const double r = t.points[i].row, v = t.points[i].x_px;
     sw += 1;
-    st += a;
+    st += r;
     sx += v;
-    stt += a * a;
-    stx += a * v;
+    stt += r * r;
+    stx += r * v;
   }
   const double den = sw * stt - st * st;
-  const double slope = den > 1e-12 ? (sw * stx - st * sx) / den : 0;
-  *x = (sx - slope * st) / sw + slope * s.angles_deg[row];
-  *gate = (n < 3 ? 2 * o.gate_px : o.gate_px) + o.gate_growth_px_per_deg * std::max(0.0, gap_deg - s.step_deg);
+  const double slope = den > 1e-9 ? (sw * stx - st * sx) / den : 0;
+  *x = (sx - slope * st) / sw + slope * row;
+  *gate = (n < 3 ? 2 * o.gate_px : o.gate_px) + 0.5 * (gap - 1);
 }
 
 // The points of one row: extrema of the border response beyond `level` (σ) for a border, or
@@ -444,20 +441,18 @@ bool continues(const BorderTrace& earlier, const BorderTrace& later, const Sweep
                const SweepOptions& o) {
   if (earlier.side != later.side) return false;
   const int gap = later.firstRow() - earlier.lastRow();
-  if (gap < 1 || gap > s.rowsOf(o.max_join_gap_deg)) return false;
-  // Quick rejection: the earlier's line at the later's start, far beyond the tolerance (a border
-  // drifts from a line by no more than 10 px a degree).
-  const double gap_deg = s.angles_deg[later.firstRow()] - s.angles_deg[earlier.lastRow()];
+  if (gap < 1 || gap > o.max_join_gap_rows) return false;
+  // Quick rejection: the earlier's line at the later's start.
   const double predicted = earlier.x_of_angle.evaluate(s.angles_deg[later.firstRow()]);
-  if (std::abs(predicted - later.points.front().x_px) > 10 * o.join_tolerance_px + 10 * gap_deg) return false;
+  if (std::abs(predicted - later.points.front().x_px) > 10 * o.join_tolerance_px + 2 * gap) return false;
   std::vector<double> angles, xs;
   for (const BorderTrace* t : {&earlier, &later})
     for (const auto& p : t->points) {
       angles.push_back(s.angles_deg[p.row]);
       xs.push_back(p.x_px);
     }
-  const double span_deg = s.angles_deg[later.lastRow()] - s.angles_deg[earlier.firstRow()];
-  const model::Polynomial joint = leastSquaresPolynomial(angles, xs, span_deg > 8 ? 3 : 2);
+  const int span = later.lastRow() - earlier.firstRow();
+  const model::Polynomial joint = leastSquaresPolynomial(angles, xs, span > 40 ? 3 : 2);
   double worst = 0, sum = 0;
   for (size_t i = 0; i < angles.size(); ++i) {
     const double r = std::abs(joint.evaluate(angles[i]) - xs[i]);
@@ -468,16 +463,15 @@ bool continues(const BorderTrace& earlier, const BorderTrace& later, const Sweep
 }
 
 // A border's slope changes slowly; where a trace's slope before and after a point differs by more
-// than max_kink_px_per_deg (lines through the points over kink_deg on either side), the linking
-// passed from one border onto another that crossed it: the trace is split there (at the largest
-// change).
-std::vector<BorderTrace> splitAtKinks(BorderTrace t, const SweepImage& s, const SweepOptions& o) {
+// than max_kink_px_per_row (lines through the kink_rows points on either side), the linking passed
+// from one border onto another that crossed it: the trace is split there (at the largest change).
+std::vector<BorderTrace> splitAtKinks(BorderTrace t, const SweepOptions& o) {
   const int n = static_cast<int>(t.points.size());
-  const int k = std::max(2, s.rowsOf(o.kink_deg));
-  auto slope = [&](int from, int to) {  // least-squares slope of points [from, to), px per degree
+  const int k = o.kink_rows;
+  auto slope = [&](int from, int to) {  // least-squares slope of points [from, to)
     double sw = 0, sr = 0, sx = 0, srr = 0, srx = 0;
     for (int i = from; i < to; ++i) {
-      const double r = s.angles_deg[t.points[i].row], x = t.points[i].x_px;
+      const double r = t.points[i].row, x = t.points[i].x_px;
       sw += 1;
       sr += r;
       sx += x;
@@ -485,10 +479,10 @@ std::vector<BorderTrace> splitAtKinks(BorderTrace t, const SweepImage& s, const 
       srx += r * x;
     }
     const double den = sw * srr - sr * sr;
-    return den > 1e-12 ? (sw * srx - sr * sx) / den : 0.0;
+    return den > 1e-9 ? (sw * srx - sr * sx) / den : 0.0;
   };
   int best = -1;
-  double largest = o.max_kink_px_per_deg;
+  double largest = o.max_kink_px_per_row;
   for (int i = k; i + k <= n; ++i)
     if (const double change = std::abs(slope(i - k, i) - slope(i, i + k)); change > largest) {
       largest = change;
@@ -498,8 +492,8 @@ std::vector<BorderTrace> splitAtKinks(BorderTrace t, const SweepImage& s, const 
   BorderTrace later = t;
   later.points.erase(later.points.begin(), later.points.begin() + best);
   t.points.resize(best);
-  std::vector<BorderTrace> out = splitAtKinks(std::move(t), s, o);
-  for (auto& piece : splitAtKinks(std::move(later), s, o)) out.push_back(std::move(piece));
+  std::vector<BorderTrace> out = splitAtKinks(std::move(t), o);
+  for (auto& piece : splitAtKinks(std::move(later), o)) out.push_back(std::move(piece));
   return out;
 }
 
@@ -523,7 +517,6 @@ bool movesWithLight(const BorderTrace& t, const SweepImage& s) {
 std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) {
   std::string error;
   if (!o.IsValid(&error)) throw std::invalid_argument(error);
-  const int max_gap_rows = s.rowsOf(o.max_gap_deg);
   std::vector<BorderTrace> done;
   for (BorderSide side : {BorderSide::kLeft, BorderSide::kRight, BorderSide::kPeak}) {
     std::vector<Growing> active;
@@ -536,7 +529,7 @@ std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) 
       std::vector<Candidate> candidates;
       for (size_t t = 0; t < active.size(); ++t) {
         double x, gate;
-        predict(active[t].trace, row, s, o, &x, &gate);
+        predict(active[t].trace, row, o, &x, &gate);
         // Established traces choose first: a new one's wide gate must not take their points.
         const double rank = active[t].trace.points.size() < 3 ? 1e6 : 0;
         for (size_t p = 0; p < peaks.size(); ++p)
@@ -554,7 +547,7 @@ std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) 
       }
       std::vector<Growing> next;
       for (size_t t = 0; t < active.size(); ++t) {
-        if (!trace_taken[t] && ++active[t].missed > max_gap_rows)
+        if (!trace_taken[t] && ++active[t].missed > o.max_gap_rows)
           done.push_back(std::move(active[t].trace));
         else
           next.push_back(std::move(active[t]));
@@ -574,7 +567,7 @@ std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) 
   // went from one border onto another, and the light's own fringes left out.
   std::vector<BorderTrace> traces;
   for (auto& whole : done)
-    for (auto& t : splitAtKinks(std::move(whole), s, o))
+    for (auto& t : splitAtKinks(std::move(whole), o))
       if (t.points.size() >= 3 && !movesWithLight(t, s)) {
         finish(t, s);
         traces.push_back(std::move(t));
@@ -602,8 +595,7 @@ std::vector<BorderTrace> findTraces(const SweepImage& s, const SweepOptions& o) 
     if (joined[a]) traces[a].points.clear();
   std::vector<BorderTrace> kept;
   for (auto& t : traces) {
-    if (t.points.empty() || t.points.size() * s.step_deg < o.min_trace_deg - 1e-9 ||
-        t.significance < o.min_significance)
+    if (t.points.empty() || static_cast<int>(t.points.size()) < o.min_trace_rows || t.significance < o.min_significance)
       continue;
     t.id = static_cast<int>(kept.size());
     kept.push_back(std::move(t));

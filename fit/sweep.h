@@ -24,7 +24,6 @@
 // keep their distance from it) left out, and the pieces of one border that the light or a
 // crossing border interrupted are joined where one low-degree polynomial runs through both.
 
-#include <cmath>
 #include <string>
 #include <vector>
 
@@ -44,14 +43,13 @@ struct SweepOptions {
   double light_percentile = 0.2;    // its profile: this quantile over the frames showing it (0, 1)
   double peak_sigma = 3;            // trace points beyond this many noise σ (edge, curvature) (> 0)
   double gate_px = 1.5;             // a trace's next point lies this close to its prediction (> 0)
-  double gate_growth_px_per_deg = 2.5;  // and the gate widens by this per degree without a point (≥ 0)
-  double max_slope_px_per_deg = 100;    // a new trace moves at most this fast (> 0)
-  double max_gap_deg = 0.8;         // a trace goes on across this many degrees without a point (≥ 0)
-  double min_trace_deg = 1;         // traces whose points cover less are dropped (> 0)
+  double max_slope_px = 20;         // a new trace moves at most this many px per frame (> 0)
+  int max_gap_rows = 4;             // a trace goes on after this many frames without a point
+  int min_trace_rows = 5;           // shorter traces are dropped (≥ 2)
   double min_significance = 10;     // a trace's Σ strength / √points, noise σ (> 0)
-  double kink_deg = 1;              // a trace's slope is taken over this many degrees (> 0)
-  double max_kink_px_per_deg = 5;   // and it is split where that slope changes by more (> 0)
-  double max_join_gap_deg = 5;      // pieces of one border this far apart are joined
+  int kink_rows = 5;                // a trace's slope is taken over this many frames (≥ 2)
+  double max_kink_px_per_row = 1;   // and split where it changes by more than this (> 0)
+  int max_join_gap_rows = 25;       // pieces of one border this many frames apart are joined
   double join_tolerance_px = 2;     // if one polynomial runs within this of both (RMS: half)
 
   bool IsValid(std::string* error) const;
@@ -59,7 +57,6 @@ struct SweepOptions {
 
 struct SweepImage {
   std::vector<double> angles_deg;  // one per row, ascending (the stack's frames)
-  double step_deg = 1;             // the median step between rows' angles
   double horizon_y_px = 0;
   cv::Mat radiance;                // CV_32F rows × width: the horizon band's luminance
   cv::Mat light;                   // CV_32F: the light's own profile taken out of it
@@ -77,10 +74,6 @@ struct SweepImage {
     const double d = x - light_x_px[row];
     return d > -light_zone_left_px && d < light_zone_right_px;  // false where the light is absent
   }
-
-  // The rows an angular span covers: the traces' options are in degrees, so that a capture's
-  // angle step does not change what is traced.
-  int rowsOf(double span_deg) const { return static_cast<int>(std::lround(span_deg / step_deg)); }
 
   int rows() const { return radiance.rows; }
   int width() const { return radiance.cols; }
