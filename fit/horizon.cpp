@@ -258,6 +258,7 @@ bool OpticalZeroOptions::IsValid(std::string* error) const {
   if (light_terms < 1 || light_terms > 4) return fail("optical zero: light_terms must be 1–4");
   if (ghost_terms < 1 || ghost_terms > 4) return fail("optical zero: ghost_terms must be 1–4");
   if (min_samples < 3) return fail("optical zero: min_samples must be ≥ 3");
+  if (!(max_zero_deg > 0)) return fail("optical zero: max_zero_deg must be > 0");
   return true;
 }
 
@@ -386,18 +387,21 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
     }
     return best;
   };
-  if (d.ghosts.empty()) {
-    // Nothing tells θ0 from the axis's x: θ0 = 0, the axis where the light's curve is there.
+  // Nothing tells θ0 from the axis's x: θ0 = 0, the axis where the light's curve is there.
+  auto unmeasured = [&] {
+    OpticalZero none;
     std::vector<double> light_res;
-    fitAtZero(d, 0, light_terms, 1, 1, weights, &zero, &light_res, nullptr);
-    zero.light_rms_px = rmsOf(light_res);
-    return zero;
-  }
+    fitAtZero(d, 0, light_terms, 1, 1, weights, &none, &light_res, nullptr);
+    none.ghosts_used = zero.ghosts_used;
+    none.light_rms_px = rmsOf(light_res);
+    return none;
+  };
+  if (d.ghosts.empty()) return unmeasured();
   double theta0 = 0;
   // Iteratively reweighted: each group weighed by its own spread, samples beyond 3σ of it
   // down-weighted (Huber), so that a ghost centre drawn from a wrong border does not pull the zero.
   for (int pass = 0; pass < 4; ++pass) {
-    theta0 = search(-3, 3, 0.05);
+    theta0 = search(-options.max_zero_deg, options.max_zero_deg, 0.05);
     theta0 = search(theta0 - 0.05, theta0 + 0.05, 0.001);
     std::vector<double> light_res;
     std::vector<std::vector<double>> ghost_res;
@@ -416,6 +420,8 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
     zero.light_rms_px = rmsOf(light_res);
     zero.centre_rms_px = rmsOf(all);
   }
+  // The best fit on the search's bound: the ghosts' centres agree on no zero within it.
+  if (std::abs(theta0) >= options.max_zero_deg - 0.05) return unmeasured();
   zero.measured = true;
   return zero;
 }

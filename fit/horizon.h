@@ -107,13 +107,17 @@ struct OpticalZeroOptions {
   int light_terms = 3;   // odd terms of the light's curve (t, t³, t⁵) (1–4)
   int ghost_terms = 2;   // odd terms of each ghost's centre curve (1–4)
   int min_samples = 8;   // a ghost takes part with at least this many centre samples (≥ 3)
+  // θ0 is searched within ±this, degrees; a best fit on the bound is no measurement (> 0).
+  double max_zero_deg = 3;
 
   bool IsValid(std::string* error) const;
 };
 
 // Fits the light's centres (from `horizon`, at the stack's angles) and the ghosts' centre curves
 // together, with one common zero (θ0, axis x). Falls back to the image's middle column and θ0 = 0
-// (measured = false) when the light is in fewer than four frames.
+// (measured = false) when the light is in fewer than four frames, and to θ0 = 0 with the axis on
+// the light's curve there when no ghost takes part or their centres agree on no zero within
+// ±max_zero_deg.
 OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
                                const std::vector<CentreSamples>& ghosts,
                                const OpticalZeroOptions& options = {});
