@@ -389,9 +389,11 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
   };
   // Nothing tells θ0 from the axis's x: θ0 = 0, the axis where the light's curve is there.
   auto unmeasured = [&] {
+    OddFitData light = d;
+    light.ghosts.clear();
     OpticalZero none;
     std::vector<double> light_res;
-    fitAtZero(d, 0, light_terms, 1, 1, weights, &none, &light_res, nullptr);
+    fitAtZero(light, 0, light_terms, 1, 1, {}, &none, &light_res, nullptr);
     none.ghosts_used = zero.ghosts_used;
     none.light_rms_px = rmsOf(light_res);
     return none;
@@ -400,9 +402,10 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
   double theta0 = 0;
   // Iteratively reweighted: each group weighed by its own spread, samples beyond 3σ of it
   // down-weighted (Huber), so that a ghost centre drawn from a wrong border does not pull the zero.
+  constexpr double kCoarseDeg = 0.05;  // the search's first grid, then 0.001° about its best
   for (int pass = 0; pass < 4; ++pass) {
-    theta0 = search(-options.max_zero_deg, options.max_zero_deg, 0.05);
-    theta0 = search(theta0 - 0.05, theta0 + 0.05, 0.001);
+    theta0 = search(-options.max_zero_deg, options.max_zero_deg, kCoarseDeg);
+    theta0 = search(theta0 - kCoarseDeg, theta0 + kCoarseDeg, 0.001);
     std::vector<double> light_res;
     std::vector<std::vector<double>> ghost_res;
     fitAtZero(d, theta0, light_terms, options.ghost_terms, light_weight, weights, &zero,
@@ -421,7 +424,7 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
     zero.centre_rms_px = rmsOf(all);
   }
   // The best fit on the search's bound: the ghosts' centres agree on no zero within it.
-  if (std::abs(theta0) >= options.max_zero_deg - 0.05) return unmeasured();
+  if (std::abs(theta0) >= options.max_zero_deg - kCoarseDeg) return unmeasured();
   zero.measured = true;
   return zero;
 }

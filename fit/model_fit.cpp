@@ -1,7 +1,5 @@
 #include "fit/model_fit.h"
 
-#include "common/image.h"
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -14,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 
+#include "common/image.h"
 #include "common/progress.h"
 #include "fit/normal_equations.h"
 #include "fit/polynomial.h"
@@ -621,9 +620,9 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   // 3. Each ghost's range ends where it draws nothing the frames can show: its brightest value
   // (Ib or Ii, in luminance, as the outlines are fitted and fit-eval counts a ghost visible)
   // below min_peak_sigma × the frame's noise σ (measured at kNoiseBlockPx, as a mono and an RGGB
-  // sensor show it alike). The shades decide where a ghost
-  // is, not the candidates' traces alone: a trace's ghost whose light the others already draw
-  // gets shades of about 0 and is no ghost there.
+  // sensor show it alike). The shades decide where a ghost is, not the candidates' traces
+  // alone: a trace's ghost whose light the others already draw gets shades of about 0 and is no
+  // ghost there.
   std::vector<double> noise(fits.size());
   tbb::parallel_for(size_t{0}, fits.size(), [&](size_t i) {
     const Frame& f = stack.frames[static_cast<size_t>(fits[i].frame)];
