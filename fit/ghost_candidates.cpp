@@ -69,8 +69,11 @@ bool raisedToHidden(const SweepImage& s, const BorderTrace& t, double fraction, 
     std::vector<double> inside;
     const int a = left ? static_cast<int>(p.x_px) + 3 : static_cast<int>(end);
     const int b = left ? static_cast<int>(end) - 1 : static_cast<int>(p.x_px) - 3;
+    // Where the light's own profile outshines what lies under it, S − light measures the light's
+    // profile more than the ghost: a ghost that stays beside the light is part of that profile.
     for (int x = std::max(a, 0); x <= std::min(b, s.width() - 1); ++x)
-      if (s.valid.at<uchar>(p.row, x)) inside.push_back(cleanAt(s, p.row, x) - outside);
+      if (s.valid.at<uchar>(p.row, x) && !(s.light.at<float>(p.row, x) > cleanAt(s, p.row, x)))
+        inside.push_back(cleanAt(s, p.row, x) - outside);
     if (inside.size() < 4 || !std::isfinite(outside)) continue;
     ++tested;
     // A low quantile: the whole stretch, not a part of it, must be raised.

@@ -21,8 +21,9 @@
 //
 // A trace left over is a ghost whose other border is hidden (beyond the frame, or in the light's
 // zone) when S stays raised from the trace to there on the ghost's side, all the way (a large
-// ghost at some angles, a ghost about the light); otherwise it is an edge inside a ghost (a
-// caustic's rim or fold) and no ghost of its own.
+// ghost at some angles, a ghost about the light), except where the light's own profile outshines
+// it (that profile, measured over the frames, holds a ghost that stays beside the light);
+// otherwise it is an edge inside a ghost (a caustic's rim or fold) and no ghost of its own.
 //
 // Each ghost gets its angle range (its traces' frames, and on while its borders are hidden in the
 // light's zone or beyond the frame) and, at every frame in it, a seed: Mx, L,

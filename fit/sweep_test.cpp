@@ -126,6 +126,33 @@ TEST(GhostCandidates, AGhostWithOneBorderInTheFrameGetsTheOtherFromItsBorderMode
   EXPECT_GE(matched_frames, 0.9 * sweep.rows());
 }
 
+// A ghost that stays beside the light, one border hidden in the light's core: the light's own
+// profile, measured over the frames, holds the ghost's inside too. Its seen border is still one
+// candidate's, seeded there.
+TEST(GhostCandidates, AGhostBesideTheLightWithOneBorderInItsCoreIsFound) {
+  PanScene scene;
+  scene.light_radius_px = 12;
+  scene.ghosts = {{1.4, 30, 0.01, 0.01}};
+  const FrameStack stack = scene.stack(anglesFrom(3, 6, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  const std::vector<GhostCandidate> candidates = findGhostCandidates(stack, sweep, findTraces(sweep));
+  int frames = 0, seeded = 0;
+  for (int row = 0; row < sweep.rows(); ++row) {
+    const auto p = scene.ghostAt(0, sweep.angles_deg[row]);
+    ASSERT_LT(std::abs(p.center_x + p.right - scene.lightX(sweep.angles_deg[row])), scene.light_radius_px);
+    if (p.center_x - p.left < 8) continue;
+    ++frames;
+    for (const auto& c : candidates)
+      if (c.present(row) && c.leftSeen(row) &&
+          std::abs(c.seed(row).center_x - c.seed(row).left - (p.center_x - p.left)) < 1.5) {
+        ++seeded;
+        break;
+      }
+  }
+  EXPECT_GE(seeded, 0.9 * frames) << "of " << frames << " frames";
+}
+
 // A ghost whose light gathers to a point, its outline at the noise (a near-focused ghost's
 // glow): no border to pair, but one candidate centred on its peak, in the frames that show it.
 TEST(GhostCandidates, AGhostWhoseLightGathersToAPointIsFoundAtItsPeak) {
