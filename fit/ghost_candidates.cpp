@@ -54,6 +54,13 @@ double hiddenFrom(const SweepImage& s, int row, double x, BorderSide side) {
   return left ? s.width() : 0.0;
 }
 
+// Whether no border can be traced at x in `row`: beyond the frame, in the light's zone, or where
+// S has no edge response (the frame's margin, masked pixels).
+bool untraceable(const SweepImage& s, int row, double x) {
+  if (!(x >= 0 && x < s.width())) return true;
+  return s.inLightZone(row, x) || !s.valid.at<uchar>(row, static_cast<int>(x));
+}
+
 // Whether S stays raised from the trace to where the ghost's other border could lie unseen
 // (hiddenFrom), in most of the trace's frames: above the outside by more than its noise
 // (noise_sigma σ, typically), and nowhere by less than `fraction` of the border's step, or of the
@@ -323,8 +330,7 @@ GhostCandidate peakCandidate(const FrameStack& stack, const SweepImage& s, const
   c.first_row = t.firstRow();
   c.last_row = t.lastRow();
   auto hidden = [&](int row) {
-    const double x = borderAt(t, s, row, row)[0];
-    return x < 0 || x > s.width() || s.inLightZone(row, x);
+    return untraceable(s, row, borderAt(t, s, row, row)[0]);
   };
   for (int k = 0; k < o.max_hidden_rows && c.first_row > 0 && hidden(c.first_row - 1); ++k) --c.first_row;
   for (int k = 0; k < o.max_hidden_rows && c.last_row + 1 < s.rows() && hidden(c.last_row + 1); ++k) ++c.last_row;
@@ -582,8 +588,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       for (const BorderTrace* t : {l, r}) {
         if (!t) continue;
         const double x = borderAt(*t, s, row, row)[0];
-        const bool beyond = x < 0 || x > s.width();
-        if (!beyond && !s.inLightZone(row, x)) return false;
+        if (!untraceable(s, row, x)) return false;
         in_frame |= t == l ? x < s.width() : x > 0;
       }
       return in_frame;

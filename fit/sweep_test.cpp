@@ -153,6 +153,33 @@ TEST(GhostCandidates, AGhostBesideTheLightWithOneBorderInItsCoreIsFound) {
   EXPECT_GE(seeded, 0.9 * frames) << "of " << frames << " frames";
 }
 
+// A ghost wider than the frame, whose one border enters it partway through the sweep: before, it
+// was in the frame all along, its border beyond the frame's edge or in the margin where S has no
+// edge response. The candidate of its border's trace is present in those frames too.
+TEST(GhostCandidates, AGhostWhoseBorderIsNotYetInTheFrameIsPresentAlready) {
+  PanScene scene;
+  scene.ghosts = {{1.6, 30, 0.02, 0.01}, {-0.8, 40, 0.01, 0.015}, {0.6, 190, 0.004, 0.004, 0.6}};
+  const FrameStack stack = scene.stack(anglesFrom(2, 6, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  const std::vector<GhostCandidate> candidates = findGhostCandidates(stack, sweep, findTraces(sweep));
+  const auto last = scene.ghostAt(2, sweep.angles_deg.back());
+  int frames = 0, present = 0;
+  for (int row = 0; row < sweep.rows(); ++row) {
+    const auto p = scene.ghostAt(2, sweep.angles_deg[row]);
+    ASSERT_LT(p.center_x - p.left, 0);
+    ++frames;
+    // The candidate of the trace of its right border, present in the frame.
+    for (const auto& c : candidates)
+      if (c.present(row) && c.right_trace >= 0 && c.right_seen.back() &&
+          std::abs(c.seed(c.last_row).center_x + c.seed(c.last_row).right - (last.center_x + last.right)) < 1.5) {
+        ++present;
+        break;
+      }
+  }
+  EXPECT_GE(present, 0.9 * frames) << "of " << frames << " frames";
+}
+
 // A ghost whose light gathers to a point, its outline at the noise (a near-focused ghost's
 // glow): no border to pair, but one candidate centred on its peak, in the frames that show it.
 TEST(GhostCandidates, AGhostWhoseLightGathersToAPointIsFoundAtItsPeak) {
