@@ -3,8 +3,9 @@
 // fall-off fixed, a frame's model image is linear in each ghost's Ib and Ii and in the pedestal's
 // terms (model/intensity.h, model/pedestal.h), so all of them are solved at once, per channel:
 // overlapping ghosts share the light they overlap in, which one at a time they trade freely.
-// Robust (Tukey's biweight at outlier_sigma noise σ of the residual, reweighted), and Ib, Ii ≥ 0
-// (an active set: a negative one is held at 0 and the rest solved again).
+// Robust (Tukey's biweight at outlier_sigma times the residual's robust σ, 1.4826 × its MAD and at
+// least the pixel noise, reweighted), and Ib, Ii ≥ 0 (an active set: a negative one is held at 0
+// and the rest solved again).
 
 #include <string>
 #include <vector>
@@ -19,7 +20,7 @@ namespace flarekit::fit {
 
 struct ShadeOptions {
   int level = 2;               // solved on k×k averages of the frame (≥ 1)
-  double outlier_sigma = 6;    // Tukey's biweight, in noise σ (> 0)
+  double outlier_sigma = 6;    // Tukey's biweight, in the residual's robust σ (> 0)
   int iterations = 3;          // reweighting passes (≥ 1)
   bool pedestal = true;        // solve the pedestal's terms too
 
