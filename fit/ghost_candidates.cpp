@@ -691,6 +691,19 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       p.outside_exponent = 1;
       p = model::clampToBounds(p);
     }
+    // On while hidden went by its traced borders alone; it ends where the whole ghost has left
+    // the frame.
+    auto beyond = [&](const model::GhostParameters& p) {
+      return p.center_x + p.right < 0 || p.center_x - p.left > s.width();
+    };
+    int first = 0, last = n - 1;
+    while (first < last && beyond(c.seeds[first])) ++first;
+    while (last > first && beyond(c.seeds[last])) --last;
+    c.seeds = {c.seeds.begin() + first, c.seeds.begin() + last + 1};
+    c.left_seen = {c.left_seen.begin() + first, c.left_seen.begin() + last + 1};
+    c.right_seen = {c.right_seen.begin() + first, c.right_seen.begin() + last + 1};
+    c.last_row = c.first_row + last;
+    c.first_row += first;
   });
   return out;
 }

@@ -180,6 +180,23 @@ TEST(GhostCandidates, AGhostWhoseBorderIsNotYetInTheFrameIsPresentAlready) {
   EXPECT_GE(present, 0.9 * frames) << "of " << frames << " frames";
 }
 
+// A ghost goes on while its borders are hidden, but not once it has left the frame whole: no
+// candidate is present where its seed lies wholly beyond the frame.
+TEST(GhostCandidates, AGhostThatHasLeftTheFrameIsNoLongerPresent) {
+  PanScene scene;
+  const FrameStack stack = scene.stack(anglesFrom(0, 9, 0.2));
+  const Horizon h = measureHorizon(stack);
+  const SweepImage sweep = buildSweep(stack, h);
+  const std::vector<GhostCandidate> candidates = findGhostCandidates(stack, sweep, findTraces(sweep));
+  ASSERT_LT(scene.ghostAt(0, 9).center_x + scene.ghostAt(0, 9).right, 0);  // the first has left
+  for (const auto& c : candidates)
+    for (int row = c.first_row; row <= c.last_row; ++row) {
+      const auto& p = c.seed(row);
+      EXPECT_GE(p.center_x + p.right, 0) << "candidate " << c.id << " at " << sweep.angles_deg[row] << "°";
+      EXPECT_LE(p.center_x - p.left, stack.size.width) << "candidate " << c.id << " at " << sweep.angles_deg[row] << "°";
+    }
+}
+
 // A ghost whose light gathers to a point, its outline at the noise (a near-focused ghost's
 // glow): no border to pair, but one candidate centred on its peak, in the frames that show it.
 TEST(GhostCandidates, AGhostWhoseLightGathersToAPointIsFoundAtItsPeak) {
