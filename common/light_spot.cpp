@@ -8,11 +8,12 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/image.h"
+#include "common/robust_statistics.h"
 
 namespace flarekit {
 namespace {
 
-// 1.4826 / √2 × the median absolute difference of horizontal neighbours: the pixel noise, which
+// kSigmaPerMad / √2 × the median absolute difference of horizontal neighbours: the pixel noise, which
 // the light's smooth fall-off hardly moves.
 double neighbourNoiseSigma(const cv::Mat& lum) {
   std::vector<float> d;
@@ -22,8 +23,7 @@ double neighbourNoiseSigma(const cv::Mat& lum) {
     for (int x = 0; x + 1 < lum.cols; x += 2) d.push_back(std::abs(p[x + 1] - p[x]));
   }
   if (d.empty()) return 0;
-  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-  return 1.4826 / std::numbers::sqrt2 * d[d.size() / 2];
+  return kSigmaPerMad / std::numbers::sqrt2 * upperMedian(d);
 }
 
 }  // namespace

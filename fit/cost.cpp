@@ -8,6 +8,8 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 
+#include "common/robust_statistics.h"
+
 namespace flarekit::fit {
 
 bool CostOptions::IsValid(std::string* error) const {
@@ -71,11 +73,7 @@ double estimateNoiseSigma(const cv::Mat& image, const cv::Mat& valid) {
   const size_t half = values.size() / 2;
   std::nth_element(values.begin(), values.begin() + half, values.end());
   values.resize(half);
-  std::nth_element(values.begin(), values.begin() + half / 2, values.end());
-  const float median = values[half / 2];
-  for (auto& v : values) v = std::abs(v - median);
-  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-  return 1.4826 * values[values.size() / 2];
+  return madSigma(values, upperMedian(values));
 }
 
 double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid, int block_px) {
@@ -115,9 +113,8 @@ double estimatePixelNoiseSigma(const cv::Mat& image, const cv::Mat& valid, int b
     }
   }
   if (differences.size() < 16) return 0;
-  std::nth_element(differences.begin(), differences.begin() + differences.size() / 2, differences.end());
   // A difference of two independent values of σ has σ√2.
-  return 1.4826 / std::sqrt(2.0) * differences[differences.size() / 2];
+  return kSigmaPerMad / std::sqrt(2.0) * upperMedian(differences);
 }
 
 FrameData FrameData::make(const cv::Mat& image, const cv::Mat& valid, const EdgeFilter& edge,

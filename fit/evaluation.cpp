@@ -17,6 +17,7 @@
 #include "common/exr.h"
 #include "common/image.h"
 #include "common/progress.h"
+#include "common/robust_statistics.h"
 #include "fit/cost.h"
 #include "fit/detail/truth.h"
 #include "fit/group_solver.h"
@@ -62,16 +63,10 @@ Blob describe(const cv::Mat& lum, cv::Point offset) {
   return b;
 }
 
-// 1.4826 × the median absolute deviation of `values` (NaN when empty).
+// The normal σ of `values` about their median, from their MAD (NaN when empty).
 double robustSigma(std::vector<float>& v) {
   if (v.empty()) return kNaN;
-  auto median = [](std::vector<float>& a) {
-    std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
-    return static_cast<double>(a[a.size() / 2]);
-  };
-  const double m = median(v);
-  for (auto& x : v) x = static_cast<float>(std::abs(x - m));
-  return 1.4826 * median(v);
+  return madSigma(v, upperMedian(v));
 }
 
 // PSNR of `a` against `reference` over `mask`, the peak being the reference's maximum there.

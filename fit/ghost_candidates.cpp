@@ -12,6 +12,7 @@
 #include <tbb/parallel_for.h>
 
 #include "common/image.h"
+#include "common/robust_statistics.h"
 #include "fit/polynomial.h"
 
 namespace flarekit::fit {
@@ -19,9 +20,7 @@ namespace flarekit::fit {
 namespace {
 
 double median(std::vector<double> v) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
+  return v.empty() ? std::numeric_limits<double>::quiet_NaN() : upperMedian(v);
 }
 
 double cleanAt(const SweepImage& s, int row, int x) {

@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include "common/image.h"
+#include "common/robust_statistics.h"
 
 namespace flarekit::fit {
 
@@ -343,9 +344,7 @@ double rmsOf(const std::vector<double>& v) {
 
 double robustSigma(std::vector<double> v) {
   if (v.empty()) return 1;
-  for (double& x : v) x = std::abs(x);
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return std::max(1.4826 * v[v.size() / 2], 1e-3);
+  return std::max(madSigma(v), 1e-3);
 }
 
 }  // namespace

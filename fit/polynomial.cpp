@@ -7,6 +7,8 @@
 
 #include <Eigen/Dense>
 
+#include "common/robust_statistics.h"
+
 namespace flarekit::fit {
 
 namespace {
@@ -59,11 +61,7 @@ model::Polynomial expanded(const CentredPolynomial& centred) {
   return {c};
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
+double median(std::vector<double> v) { return v.empty() ? 0 : upperMedian(v); }
 
 CentredPolynomial robustCentred(const std::vector<double>& angles, const std::vector<double>& values,
                                 int degree, double outlier_sigma, double floor,
@@ -73,7 +71,7 @@ CentredPolynomial robustCentred(const std::vector<double>& angles, const std::ve
   CentredPolynomial p = solveCentred(angles, values, weights, degree);
   for (int iteration = 0; iteration < 10 && n > degree + 2; ++iteration) {
     for (int i = 0; i < n; ++i) residuals[i] = std::abs(values[i] - p.evaluate(angles[i]));
-    const double sigma = std::max(1.4826 * median(residuals), floor);
+    const double sigma = std::max(kSigmaPerMad * median(residuals), floor);
     if (!(sigma > 0)) break;
     for (int i = 0; i < n; ++i) {
       const double u = residuals[i] / (outlier_sigma * sigma);

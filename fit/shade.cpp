@@ -6,6 +6,8 @@
 #include <Eigen/Dense>
 #include <opencv2/imgproc.hpp>
 
+#include "common/robust_statistics.h"
+
 #include "model/model_renderer.h"
 
 namespace flarekit::fit {
@@ -99,14 +101,11 @@ void fitShades(const cv::Mat& image, const cv::Mat& valid, double noise_sigma,
       }
       // Tukey's biweight about the residual's median.
       const Eigen::VectorXd r = a * x - b;
-      std::vector<double> sorted(r.data(), r.data() + r.size());
-      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-      const double centre = sorted[sorted.size() / 2];
-      // The residual's own robust scale (1.4826 × its MAD), at least the noise: where the outlines
-      // are still off, their misfit, far above the noise, is not an outlier.
-      for (double& v : sorted) v = std::abs(v - centre);
-      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-      const double scale = std::max(sigma, 1.4826 * sorted[sorted.size() / 2]);
+      std::vector<double> residuals(r.data(), r.data() + r.size());
+      const double centre = upperMedian(residuals);
+      // The residual's own robust scale, at least the noise: where the outlines are still off,
+      // their misfit, far above the noise, is not an outlier.
+      const double scale = std::max(sigma, madSigma(residuals, centre));
       for (Eigen::Index p = 0; p < r.size(); ++p) {
         const double u = (r(p) - centre) / (o.outlier_sigma * scale);
         w(p) = std::abs(u) < 1 ? 1 - u * u : 0.0;  // √ of the biweight (1 − u²)²

@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include "common/image.h"
+#include "common/robust_statistics.h"
 #include "fit/polynomial.h"
 
 namespace flarekit::fit {
@@ -317,7 +318,7 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
     for (int x = 0; x < w; ++x)
       if (s.valid.at<uchar>(i, x)) magnitudes.push_back(std::abs(s.edge.at<float>(i, x)));
   if (!magnitudes.empty()) {
-    const double spread = 1.4826 * quantile(magnitudes, 0.5);
+    const double spread = madSigma(magnitudes);
     if (spread > 0) s.edge /= spread;
   }
   s.edge.setTo(0, s.valid == 0);
@@ -326,7 +327,7 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
     for (int x = 0; x < w; ++x)
       if (s.valid.at<uchar>(i, x)) magnitudes.push_back(std::abs(s.peak.at<float>(i, x)));
   if (!magnitudes.empty()) {
-    const double spread = 1.4826 * quantile(magnitudes, 0.5);
+    const double spread = madSigma(magnitudes);
     if (spread > 0) s.peak /= spread;
   }
   s.peak.setTo(0, s.valid == 0);

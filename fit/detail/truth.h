@@ -32,7 +32,7 @@ struct Blob {
 // frame (fit/evaluation.cpp says why the radius is the moments' and not an area's).
 Blob describe(const cv::Mat& lum, cv::Point offset);
 
-// 1.4826 × the median absolute deviation of `values` (NaN when empty); reorders them.
+// The normal σ of `values` about their median, from their MAD (NaN when empty); reorders them.
 double robustSigma(std::vector<float>& values);
 
 // PSNR of `a` against `reference` over `mask`, the peak being the reference's maximum there.
