@@ -399,8 +399,9 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
   };
   if (d.ghosts.empty()) return unmeasured();
   double theta0 = 0;
-  // Iteratively reweighted: each group weighed by its own spread, samples beyond 3σ of it
-  // down-weighted (Huber), so that a ghost centre drawn from a wrong border does not pull the zero.
+  // Iteratively reweighted: the light and each ghost weighed by their own spread, samples beyond
+  // 3σ of it down-weighted (Huber), so that the centres of a wrong pair or of a peak that is no
+  // ghost's centre, which scatter, do not pull the zero.
   constexpr double kCoarseDeg = 0.05;  // the search's first grid, then 0.001° about its best
   for (int pass = 0; pass < 4; ++pass) {
     theta0 = search(-options.max_zero_deg, options.max_zero_deg, kCoarseDeg);
@@ -412,13 +413,14 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
     const double light_sigma = robustSigma(light_res);
     std::vector<double> all;
     for (const auto& g : ghost_res) all.insert(all.end(), g.begin(), g.end());
-    const double ghost_sigma = robustSigma(all);
     light_weight = 1 / (light_sigma * light_sigma);
-    for (size_t k = 0; k < ghost_res.size(); ++k)
+    for (size_t k = 0; k < ghost_res.size(); ++k) {
+      const double ghost_sigma = robustSigma(ghost_res[k]);
       for (size_t i = 0; i < ghost_res[k].size(); ++i) {
         const double u = std::abs(ghost_res[k][i]) / (3 * ghost_sigma);
         weights[k][i] = (u > 1 ? 1 / u : 1.0) / (ghost_sigma * ghost_sigma);
       }
+    }
     zero.light_rms_px = rmsOf(light_res);
     zero.centre_rms_px = rmsOf(all);
   }

@@ -65,6 +65,30 @@ TEST(OpticalZero, IsWhereEveryGhostsCentreMeetsTheLight) {
   EXPECT_NEAR(zero.lightX(3), scene.lightX(3), 0.2);
 }
 
+TEST(OpticalZero, AWanderingTraceDoesNotMoveIt) {
+  // A trace taken for a ghost's centre that is none: a hot spot 30 px beside the centre that
+  // wanders by ±25 px from frame to frame. Each ghost's centres are weighed by their own spread,
+  // so its many samples count for little beside a true ghost's few.
+  PanScene scene;
+  const FrameStack stack = scene.stack(anglesFrom(0, 6, 0.2));
+  const Horizon h = measureHorizon(stack);
+  std::vector<CentreSamples> centres(2);
+  for (size_t i = 0; i < stack.frames.size(); ++i) {
+    const double angle = stack.frames[i].angle_deg;
+    const auto g = scene.ghostAt(0, angle);
+    if (angle < 2) {
+      centres[0].angles_deg.push_back(angle);
+      centres[0].centre_x_px.push_back(g.center_x);
+    }
+    centres[1].angles_deg.push_back(angle);
+    centres[1].centre_x_px.push_back(g.center_x + 30 + (i % 2 ? 25 : -25));
+  }
+  const OpticalZero zero = measureOpticalZero(stack, h, centres);
+  ASSERT_TRUE(zero.measured);
+  EXPECT_NEAR(zero.angle_zero_deg, scene.angle_zero_deg, 0.02);
+  EXPECT_NEAR(zero.axis_x_px, scene.axis_x, 0.3);
+}
+
 TEST(OpticalZero, WithoutGhostsTheZeroIsNotMeasured) {
   PanScene scene;
   const FrameStack stack = scene.stack(anglesFrom(0, 3, 0.2));
