@@ -9,6 +9,7 @@
 #include "fit/ghost_candidates.h"
 #include "fit/horizon.h"
 #include "fit/sweep.h"
+#include "model/model_renderer.h"
 
 namespace flarekit::fit {
 
@@ -62,10 +63,13 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
     const int index = std::min(n - 1, static_cast<int>((k + 0.5) * n / options.frames));
     const Frame& frame = stack.frames[index];
     FramePyramid pyramid(frame.image, frame.valid, edge, estimatePixelNoiseSigma(frame.image, frame.valid));
-    // The brightest ghosts present first.
+    // The brightest ghosts present first, of those that reach into the frame: a candidate goes
+    // on while it is hidden beyond the frame's edge, where there is nothing to fit.
+    const cv::Rect image(0, 0, stack.size.width, stack.size.height);
     std::vector<model::GhostParameters> seeds;
     for (const auto& c : candidates)
-      if (c.present(index)) seeds.push_back(c.seed(index));
+      if (c.present(index) && !(model::ghostPixelBounds(c.seed(index)) & image).empty())
+        seeds.push_back(c.seed(index));
     auto peak = [](const model::GhostParameters& g) { return std::max(g.border[0], g.inside[0]); };
     std::stable_sort(seeds.begin(), seeds.end(), [&](const auto& a, const auto& b) { return peak(a) > peak(b); });
     if (static_cast<int>(seeds.size()) > options.seeds_per_frame) seeds.resize(options.seeds_per_frame);
