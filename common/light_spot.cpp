@@ -13,8 +13,8 @@
 namespace flarekit {
 namespace {
 
-// kSigmaPerMad / √2 × the median absolute difference of horizontal neighbours: the pixel noise, which
-// the light's smooth fall-off hardly moves.
+// kSigmaPerMad / √2 × the median absolute difference of horizontal neighbours: the pixel
+// noise, which the light's smooth fall-off hardly moves.
 double neighbourNoiseSigma(const cv::Mat& lum) {
   std::vector<float> d;
   d.reserve(lum.total() / 2);

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 
 #include "fit/ghost_candidates.h"
 #include "fit/testing.h"
@@ -187,13 +188,16 @@ TEST(GhostCandidates, AGhostThatHasLeftTheFrameIsNoLongerPresent) {
   const FrameStack stack = scene.stack(anglesFrom(0, 9, 0.2));
   const Horizon h = measureHorizon(stack);
   const SweepImage sweep = buildSweep(stack, h);
-  const std::vector<GhostCandidate> candidates = findGhostCandidates(stack, sweep, findTraces(sweep));
+  const std::vector<GhostCandidate> candidates =
+      findGhostCandidates(stack, sweep, findTraces(sweep));
   ASSERT_LT(scene.ghostAt(0, 9).center_x + scene.ghostAt(0, 9).right, 0);  // the first has left
   for (const auto& c : candidates)
     for (int row = c.first_row; row <= c.last_row; ++row) {
       const auto& p = c.seed(row);
-      EXPECT_GE(p.center_x + p.right, 0) << "candidate " << c.id << " at " << sweep.angles_deg[row] << "°";
-      EXPECT_LE(p.center_x - p.left, stack.size.width) << "candidate " << c.id << " at " << sweep.angles_deg[row] << "°";
+      const std::string where = "candidate " + std::to_string(c.id) + " at " +
+                                std::to_string(sweep.angles_deg[row]) + "°";
+      EXPECT_GE(p.center_x + p.right, 0) << where;
+      EXPECT_LE(p.center_x - p.left, stack.size.width) << where;
     }
 }
 
