@@ -155,6 +155,7 @@ bool SweepOptions::IsValid(std::string* error) const {
   if (!(trend_sigma_px > edge_sigma_px)) return fail("sweep: trend_sigma_px must be > edge_sigma_px");
   if (!(light_window_px >= 0)) return fail("sweep: light_window_px must be ≥ 0");
   if (!(light_percentile > 0 && light_percentile < 1)) return fail("sweep: light_percentile must be in (0, 1)");
+  if (light_min_frames < 1) return fail("sweep: light_min_frames must be ≥ 1");
   if (!(peak_sigma > 0)) return fail("sweep: peak_sigma must be > 0");
   if (!(gate_px > 0)) return fail("sweep: gate_px must be > 0");
   if (!(max_slope_px > 0)) return fail("sweep: max_slope_px must be > 0");
@@ -227,7 +228,17 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
   const int window = static_cast<int>(std::ceil(options.light_window_px));
   for (int i = 0; i < rows && i < static_cast<int>(horizon.lights.size()); ++i)
     if (horizon.lights[i].found) s.light_x_px[i] = horizon.lights[i].center.x;
-  if (window > 0) {
+  // The light's zone is at least the core the horizon found (clipped, or above half the light's
+  // peak), which a merged HDR frame may hold without clipping; with the light in too few frames
+  // to measure its profile, that core alone.
+  std::vector<float> core_radii;
+  for (const LightImage& l : horizon.lights)
+    if (l.found) core_radii.push_back(static_cast<float>(l.core_radius_px));
+  const double core = core_radii.empty() ? 0.0 : quantile(core_radii, 0.5);
+  s.light_zone_left_px = s.light_zone_right_px = core;
+  const auto light_frames = std::count_if(s.light_x_px.begin(), s.light_x_px.end(),
+                                          [](double x) { return std::isfinite(x); });
+  if (window > 0 && light_frames >= options.light_min_frames) {
     std::vector<double> profile(2 * window + 1, kNaN);
     for (int d = -window; d <= window; ++d) {
       std::vector<float> v;
@@ -235,7 +246,8 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
         if (std::isfinite(s.light_x_px[i]))
           if (const double x = sampleRow(s.radiance, s.valid, i, s.light_x_px[i] + d); std::isfinite(x))
             v.push_back(static_cast<float>(x));
-      if (v.size() >= 5) profile[d + window] = quantile(v, options.light_percentile);
+      if (static_cast<int>(v.size()) >= options.light_min_frames)
+        profile[d + window] = quantile(v, options.light_percentile);
     }
     // The part of the profile that falls off with the distance: what lies under the light at
     // the window's edges (the veils about it) is not the light's.
@@ -244,12 +256,7 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
                         : std::isfinite(left)                       ? left
                                                                     : right;
     // The light's zone: its core, out from its centre: where it clips (no profile there), and
-    // at least the core the horizon found (clipped, or above half the light's peak), which a
-    // merged HDR frame may hold without clipping.
-    std::vector<float> core_radii;
-    for (const LightImage& l : horizon.lights)
-      if (l.found) core_radii.push_back(static_cast<float>(l.core_radius_px));
-    const double core = core_radii.empty() ? 0.0 : quantile(core_radii, 0.5);
+    // at least the core the horizon found.
     for (int side : {-1, 1}) {
       int d = 0;
       while (d + 1 <= window && !std::isfinite(profile[window + side * (d + 1)])) ++d;

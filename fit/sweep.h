@@ -41,6 +41,7 @@ struct SweepOptions {
   double trend_sigma_px = 6;        // slopes smoother than this are no border (> edge_sigma_px)
   double light_window_px = 160;     // the light's profile is taken out within this distance (≥ 0)
   double light_percentile = 0.2;    // its profile: this quantile over the frames showing it (0, 1)
+  int light_min_frames = 5;         // and over at least this many of them; fewer: none (≥ 1)
   double peak_sigma = 3;            // trace points beyond this many noise σ (edge, curvature) (> 0)
   double gate_px = 1.5;             // a trace's next point lies this close to its prediction (> 0)
   double max_slope_px = 20;         // a new trace moves at most this many px per frame (> 0)

@@ -49,6 +49,27 @@ TEST(Sweep, EveryBorderIsATraceAtItsPlace) {
     }
 }
 
+// The light's profile is measured over the frames that show it; with the light in fewer frames
+// than that needs, it masks its core alone, and the ghosts about it stay in view (before, the
+// whole window about the light went unmeasured and was masked as its zone).
+TEST(Sweep, ALightInTooFewFramesToMeasureMasksItsCoreAlone) {
+  PanScene scene;
+  const FrameStack stack = scene.stack(anglesFrom(0, 0.6, 0.2));  // four frames
+  SweepOptions options;
+  ASSERT_LT(static_cast<int>(stack.frames.size()), options.light_min_frames);
+  const SweepImage sweep = buildSweep(stack, measureHorizon(stack), options);
+  EXPECT_LT(sweep.light_zone_left_px, 2 * scene.light_radius_px);
+  EXPECT_LT(sweep.light_zone_right_px, 2 * scene.light_radius_px);
+  // Every ghost border (away from the light's core) lies where the sweep can trace it.
+  for (int row = 0; row < sweep.rows(); ++row)
+    for (size_t g = 0; g < scene.ghosts.size(); ++g) {
+      const auto p = scene.ghostAt(g, sweep.angles_deg[row]);
+      for (double x : {p.center_x - p.left, p.center_x + p.right})
+        if (std::abs(x - scene.lightX(sweep.angles_deg[row])) > 2 * scene.light_radius_px)
+          EXPECT_TRUE(sweep.valid.at<uchar>(row, static_cast<int>(x))) << "row " << row << ", x " << x;
+    }
+}
+
 // A merged HDR frame may hold the light without clipping it: its core is still the light's zone,
 // where it draws no border of its own (its fall-off would otherwise pass for a ghost's edge).
 TEST(Sweep, AnUnclippedLightsCoreIsItsZoneAndDrawsNoBorder) {
