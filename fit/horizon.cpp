@@ -17,7 +17,8 @@ namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180;
 
-double quantileOfValid(const cv::Mat& lum, const cv::Mat& valid, double q) {
+// The valid values of every other row and column: enough for a frame's quantiles.
+std::vector<float> validSamples(const cv::Mat& lum, const cv::Mat& valid) {
   std::vector<float> v;
   v.reserve(lum.total() / 4);
   for (int y = 0; y < lum.rows; y += 2) {
@@ -26,6 +27,11 @@ double quantileOfValid(const cv::Mat& lum, const cv::Mat& valid, double q) {
     for (int x = 0; x < lum.cols; x += 2)
       if (ok[x]) v.push_back(p[x]);
   }
+  return v;
+}
+
+double quantileOfValid(const cv::Mat& lum, const cv::Mat& valid, double q) {
+  std::vector<float> v = validSamples(lum, valid);
   if (v.empty()) return 0;
   const size_t k = static_cast<size_t>(q * (v.size() - 1));
   std::nth_element(v.begin(), v.begin() + k, v.end());
@@ -33,17 +39,8 @@ double quantileOfValid(const cv::Mat& lum, const cv::Mat& valid, double q) {
 }
 
 double medianOfValid(const cv::Mat& lum, const cv::Mat& valid) {
-  std::vector<float> v;
-  v.reserve(lum.total() / 4);
-  for (int y = 0; y < lum.rows; y += 2) {
-    const float* p = lum.ptr<float>(y);
-    const uchar* ok = valid.ptr<uchar>(y);
-    for (int x = 0; x < lum.cols; x += 2)
-      if (ok[x]) v.push_back(p[x]);
-  }
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
+  std::vector<float> v = validSamples(lum, valid);
+  return v.empty() ? 0 : upperMedian(v);
 }
 
 // The light's core: the pixels at least half as bright as the brightest (clipped pixels count as

@@ -320,24 +320,17 @@ SweepImage buildSweep(const FrameStack& stack, const Horizon& horizon, const Swe
   }
   // In σ of the response: its robust spread over the valid points (the filters' gain and the
   // rows' correlation in one factor).
-  std::vector<float> magnitudes;
-  for (int i = 0; i < rows; ++i)
-    for (int x = 0; x < w; ++x)
-      if (s.valid.at<uchar>(i, x)) magnitudes.push_back(std::abs(s.edge.at<float>(i, x)));
-  if (!magnitudes.empty()) {
-    const double spread = madSigma(magnitudes);
-    if (spread > 0) s.edge /= spread;
+  for (cv::Mat* response : {&s.edge, &s.peak}) {
+    std::vector<float> magnitudes;
+    for (int i = 0; i < rows; ++i)
+      for (int x = 0; x < w; ++x)
+        if (s.valid.at<uchar>(i, x)) magnitudes.push_back(std::abs(response->at<float>(i, x)));
+    if (!magnitudes.empty()) {
+      const double spread = madSigma(magnitudes);
+      if (spread > 0) *response /= spread;
+    }
+    response->setTo(0, s.valid == 0);
   }
-  s.edge.setTo(0, s.valid == 0);
-  magnitudes.clear();
-  for (int i = 0; i < rows; ++i)
-    for (int x = 0; x < w; ++x)
-      if (s.valid.at<uchar>(i, x)) magnitudes.push_back(std::abs(s.peak.at<float>(i, x)));
-  if (!magnitudes.empty()) {
-    const double spread = madSigma(magnitudes);
-    if (spread > 0) s.peak /= spread;
-  }
-  s.peak.setTo(0, s.valid == 0);
   return s;
 }
 
