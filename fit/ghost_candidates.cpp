@@ -416,6 +416,22 @@ GhostCandidate peakCandidate(const FrameStack& stack, const SweepImage& s, const
   return c;
 }
 
+// On while hidden goes by the traces alone; a ghost's range ends where the whole ghost has left
+// the frame.
+void trimToFrame(GhostCandidate& c, int width) {
+  auto beyond = [&](const model::GhostParameters& p) {
+    return p.center_x + p.right < 0 || p.center_x - p.left > width;
+  };
+  int first = 0, last = static_cast<int>(c.seeds.size()) - 1;
+  while (first < last && beyond(c.seeds[first])) ++first;
+  while (last > first && beyond(c.seeds[last])) --last;
+  c.seeds = {c.seeds.begin() + first, c.seeds.begin() + last + 1};
+  c.left_seen = {c.left_seen.begin() + first, c.left_seen.begin() + last + 1};
+  c.right_seen = {c.right_seen.begin() + first, c.right_seen.begin() + last + 1};
+  c.last_row = c.first_row + last;
+  c.first_row += first;
+}
+
 }  // namespace
 
 bool CandidateOptions::IsValid(std::string* error) const {
@@ -574,6 +590,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
     if (ghosts[g].peak >= 0) {
       c = peakCandidate(stack, s, lums, traces[ghosts[g].peak], o);
       c.id = static_cast<int>(g);
+      trimToFrame(c, s.width());
       return;
     }
     c.left_trace = l ? l->id : -1;
@@ -690,19 +707,7 @@ std::vector<GhostCandidate> findGhostCandidates(const FrameStack& stack, const S
       p.outside_exponent = 1;
       p = model::clampToBounds(p);
     }
-    // On while hidden went by its traced borders alone; it ends where the whole ghost has left
-    // the frame.
-    auto beyond = [&](const model::GhostParameters& p) {
-      return p.center_x + p.right < 0 || p.center_x - p.left > s.width();
-    };
-    int first = 0, last = n - 1;
-    while (first < last && beyond(c.seeds[first])) ++first;
-    while (last > first && beyond(c.seeds[last])) --last;
-    c.seeds = {c.seeds.begin() + first, c.seeds.begin() + last + 1};
-    c.left_seen = {c.left_seen.begin() + first, c.left_seen.begin() + last + 1};
-    c.right_seen = {c.right_seen.begin() + first, c.right_seen.begin() + last + 1};
-    c.last_row = c.first_row + last;
-    c.first_row += first;
+    trimToFrame(c, s.width());
   });
   return out;
 }

@@ -224,6 +224,25 @@ TEST(GhostCandidates, AGhostThatHasLeftTheFrameIsNoLongerPresent) {
 
 // A ghost whose light gathers to a point, its outline at the noise (a near-focused ghost's
 // glow): no border to pair, but one candidate centred on its peak, in the frames that show it.
+// The same for a ghost found at its peak, which goes on while its peak is hidden beyond the frame.
+TEST(GhostCandidates, AGhostFoundAtItsPeakThatHasLeftTheFrameIsNoLongerPresent) {
+  PanScene scene;
+  scene.ghosts = {{-1.2, 40, 1e-4, 0.03, 1, 1}};
+  const FrameStack stack = scene.stack(anglesFrom(0, 12, 0.2));
+  const SweepImage sweep = buildSweep(stack, measureHorizon(stack));
+  CandidateSummary summary;
+  const std::vector<GhostCandidate> candidates =
+      findGhostCandidates(stack, sweep, findTraces(sweep), {}, &summary);
+  ASSERT_EQ(summary.peaks, 1);
+  ASSERT_GT(scene.ghostAt(0, 12).center_x - scene.ghostAt(0, 12).right, stack.size.width);
+  for (const auto& c : candidates)
+    for (int row = c.first_row; row <= c.last_row; ++row) {
+      const auto& p = c.seed(row);
+      EXPECT_LE(p.center_x - p.left, stack.size.width)
+          << "candidate " << c.id << " at " << sweep.angles_deg[row] << "°";
+    }
+}
+
 TEST(GhostCandidates, AGhostWhoseLightGathersToAPointIsFoundAtItsPeak) {
   PanScene scene;
   scene.ghosts = {{1.6, 30, 0.02, 0.01}, {-0.8, 40, 1e-4, 0.03, 1, 1}};
