@@ -50,8 +50,7 @@ TEST(Sweep, EveryBorderIsATraceAtItsPlace) {
 }
 
 // The light's profile is measured over the frames that show it; with the light in fewer frames
-// than that needs, it masks its core alone, and the ghosts about it stay in view (before, the
-// whole window about the light went unmeasured and was masked as its zone).
+// than that needs, it masks its core alone, and the ghosts about it stay in view.
 TEST(Sweep, ALightInTooFewFramesToMeasureMasksItsCoreAlone) {
   PanScene scene;
   const FrameStack stack = scene.stack(anglesFrom(0, 0.6, 0.2));  // four frames
@@ -66,7 +65,8 @@ TEST(Sweep, ALightInTooFewFramesToMeasureMasksItsCoreAlone) {
       const auto p = scene.ghostAt(g, sweep.angles_deg[row]);
       for (double x : {p.center_x - p.left, p.center_x + p.right})
         if (std::abs(x - scene.lightX(sweep.angles_deg[row])) > 2 * scene.light_radius_px)
-          EXPECT_TRUE(sweep.valid.at<uchar>(row, static_cast<int>(x))) << "row " << row << ", x " << x;
+          EXPECT_TRUE(sweep.valid.at<uchar>(row, static_cast<int>(x)))
+              << "row " << row << ", x " << x;
     }
 }
 
@@ -222,9 +222,8 @@ TEST(GhostCandidates, AGhostThatHasLeftTheFrameIsNoLongerPresent) {
     }
 }
 
-// A ghost whose light gathers to a point, its outline at the noise (a near-focused ghost's
-// glow): no border to pair, but one candidate centred on its peak, in the frames that show it.
-// The same for a ghost found at its peak, which goes on while its peak is hidden beyond the frame.
+// A ghost found at its peak goes on while its peak is hidden beyond the frame, and ends, as every
+// ghost, where it has wholly left the frame.
 TEST(GhostCandidates, AGhostFoundAtItsPeakThatHasLeftTheFrameIsNoLongerPresent) {
   PanScene scene;
   scene.ghosts = {{-1.2, 40, 1e-4, 0.03, 1, 1}};
@@ -243,6 +242,8 @@ TEST(GhostCandidates, AGhostFoundAtItsPeakThatHasLeftTheFrameIsNoLongerPresent) 
     }
 }
 
+// A ghost whose light gathers to a point, its outline at the noise (a near-focused ghost's
+// glow): no border to pair, but one candidate centred on its peak, in the frames that show it.
 TEST(GhostCandidates, AGhostWhoseLightGathersToAPointIsFoundAtItsPeak) {
   PanScene scene;
   scene.ghosts = {{1.6, 30, 0.02, 0.01}, {-0.8, 40, 1e-4, 0.03, 1, 1}};
