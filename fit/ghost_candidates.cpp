@@ -157,7 +157,8 @@ std::vector<double> smoothed(const std::vector<double>& angles, const std::vecto
 }
 
 // A border's position at every row of [first, last]: its trace's polynomial, of degree 2 at most
-// beyond the trace's own frames (it is extrapolated there).
+// beyond the trace's own frames (it is extrapolated there), moved to run through the trace's end
+// point on that side (where the border was last seen, not where a fit over all its points puts it).
 std::vector<double> borderAt(const BorderTrace& t, const SweepImage& s, int first, int last) {
   std::vector<double> angles, xs;
   for (const auto& p : t.points) {
@@ -165,10 +166,15 @@ std::vector<double> borderAt(const BorderTrace& t, const SweepImage& s, int firs
     xs.push_back(p.x_px);
   }
   const model::Polynomial outside = robustPolynomial(angles, xs, std::min<int>(2, angles.size() / 8));
+  const double before = xs.front() - outside.evaluate(angles.front());
+  const double after = xs.back() - outside.evaluate(angles.back());
   std::vector<double> out;
   for (int r = first; r <= last; ++r) {
-    const bool within = r >= t.firstRow() && r <= t.lastRow();
-    out.push_back((within ? t.x_of_angle : outside).evaluate(s.angles_deg[r]));
+    const double a = s.angles_deg[r];
+    if (r >= t.firstRow() && r <= t.lastRow())
+      out.push_back(t.x_of_angle.evaluate(a));
+    else
+      out.push_back(outside.evaluate(a) + (r < t.firstRow() ? before : after));
   }
   return out;
 }
