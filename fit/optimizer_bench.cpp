@@ -63,8 +63,8 @@ nlohmann::json benchOptimizers(const FrameStack& stack, const OptimizerBenchOpti
     const int index = std::min(n - 1, static_cast<int>((k + 0.5) * n / options.frames));
     const Frame& frame = stack.frames[index];
     FramePyramid pyramid(frame.image, frame.valid, edge, estimatePixelNoiseSigma(frame.image, frame.valid));
-    // The brightest ghosts present first, of those that reach into the frame: a candidate goes
-    // on while it is hidden beyond the frame's edge, where there is nothing to fit.
+    // The brightest ghosts present first, of those with a pixel in the frame: a candidate's range
+    // ends where it has left the frame, but within it a seed may still lie wholly beyond the edge.
     const cv::Rect image(0, 0, stack.size.width, stack.size.height);
     std::vector<model::GhostParameters> seeds;
     for (const auto& c : candidates)
