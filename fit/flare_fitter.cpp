@@ -120,8 +120,7 @@ FitResult measureCaptureGeometry(const FrameStack& stack, const FlareFitterOptio
     for (size_t i = 0; i < stack.frames.size(); ++i) {
       LightImage& light = result.horizon.lights[i];
       const double x = sum.optical_zero.lightX(stack.frames[i].angle_deg);
-      const bool cut = !light.found || light.center.x < 2 * light.core_radius_px ||
-                       light.center.x > stack.size.width - 2 * light.core_radius_px;
+      const bool cut = !light.found || light.cutByEdge(stack.size.width);
       if (cut && x > -result.light.radius_px && x < stack.size.width + result.light.radius_px)
         light = {true, {x, result.horizon.y_px}, light.core_radius_px};
     }

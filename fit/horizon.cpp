@@ -356,9 +356,7 @@ OpticalZero measureOpticalZero(const FrameStack& stack, const Horizon& horizon,
   OddFitData d;
   for (size_t i = 0; i < stack.frames.size() && i < horizon.lights.size(); ++i) {
     const LightImage& l = horizon.lights[i];
-    // A core cut by the frame's edge has its centroid pulled inwards.
-    if (!l.found || l.center.x < 2 * l.core_radius_px || l.center.x > stack.size.width - 2 * l.core_radius_px)
-      continue;
+    if (!l.found || l.cutByEdge(stack.size.width)) continue;
     d.light_angles.push_back(stack.frames[i].angle_deg);
     d.light_x.push_back(l.center.x);
   }

@@ -44,6 +44,12 @@ struct LightImage {
   bool found = false;         // false: the light is outside the frame
   cv::Point2d center;         // centroid of the core, image pixels
   double core_radius_px = 0;  // radius of a disc of the core's area
+
+  // Whether the edge of a frame `width_px` wide cuts its core: the centroid is then pulled
+  // inwards, not the light's centre.
+  bool cutByEdge(int width_px) const {
+    return center.x < 2 * core_radius_px || center.x > width_px - 2 * core_radius_px;
+  }
 };
 
 struct Horizon {

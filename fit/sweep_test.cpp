@@ -63,10 +63,11 @@ TEST(Sweep, ALightInTooFewFramesToMeasureMasksItsCoreAlone) {
   for (int row = 0; row < sweep.rows(); ++row)
     for (size_t g = 0; g < scene.ghosts.size(); ++g) {
       const auto p = scene.ghostAt(g, sweep.angles_deg[row]);
-      for (double x : {p.center_x - p.left, p.center_x + p.right})
-        if (std::abs(x - scene.lightX(sweep.angles_deg[row])) > 2 * scene.light_radius_px)
-          EXPECT_TRUE(sweep.valid.at<uchar>(row, static_cast<int>(x)))
-              << "row " << row << ", x " << x;
+      for (double x : {p.center_x - p.left, p.center_x + p.right}) {
+        if (std::abs(x - scene.lightX(sweep.angles_deg[row])) > 2 * scene.light_radius_px) {
+          EXPECT_TRUE(sweep.valid.at<uchar>(row, static_cast<int>(x))) << "row " << row << ", x " << x;
+        }
+      }
     }
 }
 
