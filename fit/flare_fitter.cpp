@@ -184,17 +184,31 @@ FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
         }
       result.frame_fits.push_back(std::move(f));
     }
+  } else if (options.reseed_from_model) {
+    std::vector<int> first;
+    for (size_t i = 0; i < frames.size(); i += 2) first.push_back(frames[i]);
+    const std::vector<FrameFit> first_fits =
+        fitFrames(stack, first, result.horizon, result.light, result.candidates, options.frame_fit);
+    sum.seconds_frame_fit = since(t);
+    t = Clock::now();
+    const model::FlareModel first_model = fitModel(stack, result.horizon, result.light, result.candidates,
+                                                   first_fits, sum.optical_zero, options.model_fit);
+    sum.seconds_model_fit = since(t);
+    t = Clock::now();
+    result.frame_fits = fitFrames(stack, frames, result.horizon, result.light,
+                                  seedsFromModel(result.candidates, first_model, stack), options.frame_fit,
+                                  &sum.frame_fit);
   } else {
     result.frame_fits = fitFrames(stack, frames, result.horizon, result.light, result.candidates,
                                   options.frame_fit, &sum.frame_fit);
   }
-  sum.seconds_frame_fit = since(t);
+  sum.seconds_frame_fit += since(t);
 
   t = Clock::now();
   result.model = fitModel(stack, result.horizon, result.light, result.candidates, result.frame_fits,
                           sum.optical_zero, options.model_fit, &sum.model_fit);
   sum.ghosts = static_cast<int>(result.model.ghosts.size());
-  sum.seconds_model_fit = since(t);
+  sum.seconds_model_fit += since(t);
   // Frame indices of the stack the caller gave.
   for (auto& f : result.frame_fits) f.frame = result.frames_used[f.frame];
   sum.seconds_total = since(t0);

@@ -43,6 +43,10 @@ struct FlareFitterOptions {
   double frame_step_deg = 0.8;
   // Stage 5 skipped: the model's polynomials go through the candidates' seeds.
   bool skip_frame_fit = false;
+  // Stages 5 and 6 run twice: first on every other of those frames, then on all of them seeded
+  // from the first model's curves (seedsFromModel), which pool every frame's evidence where a
+  // seed from the traces has only its own frame's.
+  bool reseed_from_model = true;
   // Threads (≥ 1); the result is the same for any number.
   int threads = 2;
 

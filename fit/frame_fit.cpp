@@ -38,6 +38,32 @@ model::GhostParameters canonicalShade(const model::GhostParameters& g) {
   return c;
 }
 
+std::vector<GhostCandidate> seedsFromModel(const std::vector<GhostCandidate>& candidates,
+                                           const model::FlareModel& model, const FrameStack& stack) {
+  std::vector<GhostCandidate> out = candidates;
+  for (auto& c : out) {
+    const auto track = std::find_if(model.ghosts.begin(), model.ghosts.end(),
+                                    [&](const model::GhostTrack& g) { return g.id == c.id; });
+    if (track == model.ghosts.end()) continue;
+    for (int row = c.first_row; row <= c.last_row; ++row) {
+      const double angle = model.capture.fieldAngle(stack.frames[row].angle_deg);
+      if (!track->covers(angle)) continue;
+      const model::GhostParameters m = track->at(angle, stack.channels);
+      model::GhostParameters& seed = c.seeds[row - c.first_row];
+      const double xl = c.leftSeen(row) ? seed.center_x - seed.left : m.center_x - m.left;
+      const double xr = c.rightSeen(row) ? seed.center_x + seed.right : m.center_x + m.right;
+      if (!(xr - xl > 1)) continue;
+      model::GhostParameters s = m;
+      s.center_x = std::clamp(c.leftSeen(row) && c.rightSeen(row) ? seed.center_x : m.center_x, xl + 0.5, xr - 0.5);
+      s.center_y = seed.center_y;
+      s.left = s.center_x - xl;
+      s.right = xr - s.center_x;
+      seed = model::clampToBounds(s);
+    }
+  }
+  return out;
+}
+
 namespace {
 
 

@@ -21,6 +21,7 @@
 #include "fit/horizon.h"
 #include "fit/group_solver.h"
 #include "fit/shade.h"
+#include "model/flare_model.h"
 #include "model/ghost_shape.h"
 #include "model/pedestal.h"
 
@@ -67,6 +68,13 @@ std::vector<FrameFit> fitFrames(const FrameStack& stack, const std::vector<int>&
                                 const Horizon& horizon, const LightPattern& pattern,
                                 const std::vector<GhostCandidate>& candidates,
                                 const FrameFitOptions& options, FrameFitSummary* summary = nullptr);
+
+// The candidates re-seeded from a model fitted to them: at every frame of a candidate's range that
+// its model ghost covers, the model's parameters there, with the borders the sweep saw in that
+// frame kept where they were (the middle moved to lie between them). Candidates without a model
+// ghost, and frames it does not cover, keep their seeds.
+std::vector<GhostCandidate> seedsFromModel(const std::vector<GhostCandidate>& candidates,
+                                           const model::FlareModel& model, const FrameStack& stack);
 
 // The ghosts' outline value and inside value in a canonical form: an inside fall-off no longer
 // than the deepest any point of the outline can lie, min(h, (L + R) / 2), with Ii the value the

@@ -399,6 +399,14 @@ model::Polynomial difference(const model::Polynomial& a, const model::Polynomial
   return d;
 }
 
+// a + b.
+model::Polynomial plus(const model::Polynomial& a, const model::Polynomial& b) {
+  model::Polynomial s = a;
+  s.coefficients.resize(std::max(a.coefficients.size(), b.coefficients.size()), 0.0);
+  for (size_t i = 0; i < b.coefficients.size(); ++i) s.coefficients[i] += b.coefficients[i];
+  return s;
+}
+
 // `p` as a polynomial that stays within bounds `b` over [lo, hi] (where the model file is
 // checked): where it strays, the least-squares polynomial through its values clamped to the
 // bounds, of the highest degree that stays within them.
@@ -477,12 +485,22 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   // 1. Each parameter's robust polynomial over the frame fits (for L and R, the borders'), of the
   // degree that predicts held-out fits best.
   const auto t_poly = Clock::now();
-  std::map<int, std::pair<std::vector<double>, std::vector<model::GhostParameters>>> samples;
+  struct Samples {
+    std::vector<double> angles;
+    std::vector<model::GhostParameters> ghosts;
+    std::vector<bool> left_seen, right_seen;  // whether the sweep saw that border in the frame
+  };
+  std::map<int, const GhostCandidate*> candidate_of;
+  for (const auto& c : candidates) candidate_of[c.id] = &c;
+  std::map<int, Samples> samples;
   for (const auto& f : fits)
     for (size_t j = 0; j < f.ghost_ids.size(); ++j) {
+      const GhostCandidate& c = *candidate_of.at(f.ghost_ids[j]);
       auto& s = samples[f.ghost_ids[j]];
-      s.first.push_back(m.capture.fieldAngle(f.angle_deg));
-      s.second.push_back(f.ghosts[j]);
+      s.angles.push_back(m.capture.fieldAngle(f.angle_deg));
+      s.ghosts.push_back(f.ghosts[j]);
+      s.left_seen.push_back(c.present(f.frame) && c.leftSeen(f.frame));
+      s.right_seen.push_back(c.present(f.frame) && c.rightSeen(f.frame));
     }
   std::vector<GhostCurves> curves;
   // Each fitted frame's pedestal under the model's ghosts (from the frame fits, then the shades).
@@ -490,29 +508,54 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
   for (const auto& f : fits) pedestal_of_frame[f.frame] = f.pedestal;
   for (const auto& c : candidates) {
     auto it = samples.find(c.id);
-    if (it == samples.end() || it->second.first.empty()) continue;
-    const auto& [angles, ghosts] = it->second;
+    if (it == samples.end() || it->second.angles.empty()) continue;
+    const auto& [angles, ghosts, left_seen, right_seen] = it->second;
     GhostCurves g;
     g.id = c.id;
     for (int k = 0; k < p; ++k)
       g.bounds.push_back(fitBounds(k, channels, stack.size, model::kUnbounded));
     g.angle_min = std::max(capture_min, m.capture.fieldAngle(stack.frames[c.first_row].angle_deg) - half_step);
     g.angle_max = std::min(capture_max, m.capture.fieldAngle(stack.frames[c.last_row].angle_deg) + half_step);
-    auto curve = [&](const std::vector<double>& values) {
-      const int degree = std::min(degreeByValidation(angles, values, o.min_degree, o.max_degree),
-                                  static_cast<int>(angles.size()) - 1);
-      return robustPolynomial(angles, values, degree);
+    auto curveOver = [&](const std::vector<double>& at, const std::vector<double>& values) {
+      const int degree = std::min(degreeByValidation(at, values, o.min_degree, o.max_degree),
+                                  static_cast<int>(at.size()) - 1);
+      return robustPolynomial(at, values, degree);
     };
+    auto curve = [&](const std::vector<double>& values) { return curveOver(angles, values); };
     // The borders, not the middle and half-widths, are what a frame measures where a ghost's
-    // other border is beyond it: x_L = Mx − L and x_R = Mx + R get curves of their own, and L and
-    // R are the differences of those from Mx's, so a well-measured border keeps its own degree.
-    std::vector<double> xl, xr, mx;
+    // other border is beyond it: x_L = Mx − L and x_R = Mx + R get curves of their own, each
+    // through the frames that saw that border (where enough did; elsewhere a frame's fit places
+    // it freely). The middle follows both borders' frames where both were seen; where only one
+    // was, it is that border's curve less the half-width's on its side (a frame places the middle
+    // of such a ghost freely too, but never beyond its seen border).
+    std::vector<double> xl, xr, mx, left, right;
     for (const auto& q : ghosts) {
       xl.push_back(q.center_x - q.left);
       xr.push_back(q.center_x + q.right);
       mx.push_back(q.center_x);
+      left.push_back(q.left);
+      right.push_back(q.right);
     }
-    const model::Polynomial middle = curve(mx);
+    auto seenEnough = [&](const std::vector<bool>& seen) {
+      return std::count(seen.begin(), seen.end(), true) > o.max_degree + 1;
+    };
+    auto borderCurve = [&](const std::vector<double>& x, const std::vector<bool>& seen) {
+      if (!seenEnough(seen)) return curve(x);
+      std::vector<double> at, values;
+      for (size_t i = 0; i < x.size(); ++i)
+        if (seen[i]) {
+          at.push_back(angles[i]);
+          values.push_back(x[i]);
+        }
+      return curveOver(at, values);
+    };
+    const model::Polynomial left_border = borderCurve(xl, left_seen);
+    const model::Polynomial right_border = borderCurve(xr, right_seen);
+    const bool left_only = seenEnough(left_seen) && !seenEnough(right_seen);
+    const bool right_only = seenEnough(right_seen) && !seenEnough(left_seen);
+    model::Polynomial middle = curve(mx);
+    if (left_only) middle = plus(left_border, curve(left));
+    if (right_only) middle = difference(right_border, curve(right));
     for (int k = 0; k < p; ++k) {
       model::Polynomial poly;
       if (k == model::param::kMy) {
@@ -520,9 +563,9 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
       } else if (k == model::param::kMx) {
         poly = middle;
       } else if (k == model::param::kL) {
-        poly = difference(middle, curve(xl));
+        poly = difference(middle, left_border);
       } else if (k == model::param::kR) {
-        poly = difference(curve(xr), middle);
+        poly = difference(right_border, middle);
       } else {
         std::vector<double> values;
         for (const auto& q : ghosts) values.push_back(model::toParameterVector(q)[k]);

@@ -79,6 +79,8 @@ SceneFits sceneFits(const NestedScene& scene, const FrameStack& stack, bool phan
     out.candidates[g].id = g;
     out.candidates[g].first_row = 0;
     out.candidates[g].last_row = n - 1;
+    out.candidates[g].left_seen.assign(n, true);
+    out.candidates[g].right_seen.assign(n, true);
   }
   for (int i = 0; i < n; i += 2) {
     FrameFit f;
