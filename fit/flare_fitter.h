@@ -10,6 +10,9 @@
 //                                                then the optical zero from their centres
 //   5. frame fits        fit/frame_fit.h         every frame's ghosts fitted together
 //   6. model fit         fit/model_fit.h         polynomials, refined against the frames
+//   5, 6 again           fit/frame_fit.h         the frames seeded from that model's curves
+//                                                (reseed_from_model; the first run on every
+//                                                other frame)
 //
 // Evaluation (fit/evaluation.h) and the report (fit/report.h) read the result.
 
