@@ -191,8 +191,10 @@ FitResult fitFlare(const FrameStack& full, const FlareFitterOptions& options) {
         fitFrames(stack, first, result.horizon, result.light, result.candidates, options.frame_fit);
     sum.seconds_frame_fit = since(t);
     t = Clock::now();
+    ModelFitOptions first_options = options.model_fit;
+    first_options.pedestal = false;  // only its ghosts seed the second pass
     const model::FlareModel first_model = fitModel(stack, result.horizon, result.light, result.candidates,
-                                                   first_fits, sum.optical_zero, options.model_fit);
+                                                   first_fits, sum.optical_zero, first_options);
     sum.seconds_model_fit = since(t);
     t = Clock::now();
     result.frame_fits = fitFrames(stack, frames, result.horizon, result.light,

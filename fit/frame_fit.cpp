@@ -54,7 +54,8 @@ std::vector<GhostCandidate> seedsFromModel(const std::vector<GhostCandidate>& ca
       const double xr = c.rightSeen(row) ? seed.center_x + seed.right : m.center_x + m.right;
       if (!(xr - xl > 1)) continue;
       model::GhostParameters s = m;
-      s.center_x = std::clamp(c.leftSeen(row) && c.rightSeen(row) ? seed.center_x : m.center_x, xl + 0.5, xr - 0.5);
+      const double middle = c.leftSeen(row) && c.rightSeen(row) ? seed.center_x : m.center_x;
+      s.center_x = std::clamp(middle, xl + 0.5, xr - 0.5);
       s.center_y = seed.center_y;
       s.left = s.center_x - xl;
       s.right = xr - s.center_x;

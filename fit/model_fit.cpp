@@ -553,9 +553,9 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     const model::Polynomial right_border = borderCurve(xr, right_seen);
     const bool left_only = seenEnough(left_seen) && !seenEnough(right_seen);
     const bool right_only = seenEnough(right_seen) && !seenEnough(left_seen);
-    model::Polynomial middle = curve(mx);
-    if (left_only) middle = plus(left_border, curve(left));
-    if (right_only) middle = difference(right_border, curve(right));
+    const model::Polynomial middle = left_only    ? plus(left_border, curve(left))
+                                     : right_only ? difference(right_border, curve(right))
+                                                  : curve(mx);
     for (int k = 0; k < p; ++k) {
       model::Polynomial poly;
       if (k == model::param::kMy) {

@@ -3,7 +3,8 @@
 //
 // First each ghost's parameters become polynomials in the field angle θ − θ0 (the optical zero)
 // by robust least squares over its frame fits (a border's over the frames where the sweep saw
-// it), each of the degree that predicts held-out fits best; then the shades' polynomials of all ghosts at once, by linear least squares against the
+// it), each of the degree that predicts held-out fits best; then the shades' polynomials of all
+// ghosts at once, by linear least squares against the
 // frames for those outlines (fit/shade.h ShadeEquations). With `refine`, the coefficients
 // themselves are then refined against the frames directly, in one Ceres problem whose parameter
 // blocks are each ghost's coefficients and whose residuals are the frames' pixels (a stride of
