@@ -390,20 +390,11 @@ void solveShadeCurves(std::vector<GhostCurves>& curves, const std::vector<ShadeF
   }
 }
 
-// a − b.
-model::Polynomial difference(const model::Polynomial& a, const model::Polynomial& b) {
-  model::Polynomial d;
-  d.coefficients.assign(std::max(a.coefficients.size(), b.coefficients.size()), 0.0);
-  for (size_t i = 0; i < a.coefficients.size(); ++i) d.coefficients[i] += a.coefficients[i];
-  for (size_t i = 0; i < b.coefficients.size(); ++i) d.coefficients[i] -= b.coefficients[i];
-  return d;
-}
-
-// a + b.
-model::Polynomial plus(const model::Polynomial& a, const model::Polynomial& b) {
+// a + sign·b (sign ±1).
+model::Polynomial combined(const model::Polynomial& a, const model::Polynomial& b, double sign) {
   model::Polynomial s = a;
   s.coefficients.resize(std::max(a.coefficients.size(), b.coefficients.size()), 0.0);
-  for (size_t i = 0; i < b.coefficients.size(); ++i) s.coefficients[i] += b.coefficients[i];
+  for (size_t i = 0; i < b.coefficients.size(); ++i) s.coefficients[i] += sign * b.coefficients[i];
   return s;
 }
 
@@ -553,8 +544,8 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     const model::Polynomial right_border = borderCurve(xr, right_seen);
     const bool left_only = seenEnough(left_seen) && !seenEnough(right_seen);
     const bool right_only = seenEnough(right_seen) && !seenEnough(left_seen);
-    const model::Polynomial middle = left_only    ? plus(left_border, curve(left))
-                                     : right_only ? difference(right_border, curve(right))
+    const model::Polynomial middle = left_only    ? combined(left_border, curve(left), +1)
+                                     : right_only ? combined(right_border, curve(right), -1)
                                                   : curve(mx);
     for (int k = 0; k < p; ++k) {
       model::Polynomial poly;
@@ -563,9 +554,9 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
       } else if (k == model::param::kMx) {
         poly = middle;
       } else if (k == model::param::kL) {
-        poly = difference(middle, left_border);
+        poly = combined(middle, left_border, -1);
       } else if (k == model::param::kR) {
-        poly = difference(right_border, middle);
+        poly = combined(right_border, middle, -1);
       } else {
         std::vector<double> values;
         for (const auto& q : ghosts) values.push_back(model::toParameterVector(q)[k]);

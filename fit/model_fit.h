@@ -4,16 +4,14 @@
 // First each ghost's parameters become polynomials in the field angle θ − θ0 (the optical zero)
 // by robust least squares over its frame fits (a border's over the frames where the sweep saw
 // it), each of the degree that predicts held-out fits best; then the shades' polynomials of all
-// ghosts at once, by linear least squares against the
-// frames for those outlines (fit/shade.h ShadeEquations). With `refine`, the coefficients
-// themselves are then refined against the frames directly, in one Ceres problem whose parameter
-// blocks are each ghost's coefficients and whose residuals are the frames' pixels (a stride of
-// frames, each at a level of its pyramid), each frame's in units of its brightest ghost's peak,
-// as PSNR weighs a frame's error. It is off by default: while ghosts are missed or spurious, it
-// bends the found ones over what the others leave (docs/fitting.md). A ghost is kept over the
-// frames where its shades draw light above the noise, and dropped where they never do. The
-// pedestal under the ghosts is fitted last, to what the model's ghosts leave of every frame, and
-// kept as polynomials too.
+// ghosts at once, by linear least squares against the frames for those outlines (fit/shade.h
+// ShadeEquations). With `refine`, the coefficients themselves are then refined against the
+// frames directly, in one Ceres problem whose parameter blocks are each ghost's coefficients and
+// whose residuals are the frames' pixels (a stride of frames, each at a level of its pyramid),
+// each frame's in units of its brightest model ghost's peak. It is off by default: it lowers the
+// model's PSNR (docs/fitting.md, limits). A ghost is kept over the frames where its shades draw
+// light above the noise, and dropped where they never do. The pedestal under the ghosts is
+// fitted last, to what the model's ghosts leave of every frame, and kept as polynomials too.
 
 #include <string>
 #include <vector>
