@@ -435,7 +435,6 @@ bool ModelFitOptions::IsValid(std::string* error) const {
   };
   if (min_degree < 0 || max_degree < min_degree || max_degree > model::kMaxPolynomialDegree)
     return fail("model fit: need 0 ≤ min_degree ≤ max_degree ≤ 10");
-  if (refine_frame_stride < 1) return fail("model fit: refine_frame_stride must be ≥ 1");
   if (refine_pixels < 1000) return fail("model fit: refine_pixels must be ≥ 1000");
   if (refine_iterations < 1) return fail("model fit: refine_iterations must be ≥ 1");
   if (!(min_peak_sigma >= 0)) return fail("model fit: min_peak_sigma must be ≥ 0");
@@ -601,17 +600,18 @@ model::FlareModel fitModel(const FrameStack& stack, const Horizon& horizon, cons
     cost.max_pixels = o.refine_pixels;
     cost.whole_frame = true;  // the ghosts move while refined: the region must not follow the seeds
     const EdgeFilter edge(cost);
+    // The fitted frames: only there is the pedestal under the ghosts known, and a target that
+    // kept it would have the ghosts bent to draw the veils the pedestal draws.
     std::vector<RefineFrame> frames;
-    for (size_t i = 0; i < stack.frames.size(); i += o.refine_frame_stride) {
+    for (const auto& fit : fits) {
+      const auto i = static_cast<size_t>(fit.frame);
       RefineFrame rf;
       rf.angle = m.capture.fieldAngle(stack.frames[i].angle_deg);
       for (size_t g = 0; g < curves.size(); ++g)
         if (curves[g].covers(rf.angle)) rf.ghosts.push_back(static_cast<int>(g));
       if (rf.ghosts.empty()) continue;
       const Frame f = withoutLight(i);
-      cv::Mat target = f.image;
-      if (auto it = pedestal_of_frame.find(static_cast<int>(i)); it != pedestal_of_frame.end())
-        target = target - it->second.image(stack.size);
+      const cv::Mat target = f.image - pedestal_of_frame.at(fit.frame).image(stack.size);
       const double sigma = estimatePixelNoiseSigma(stack.frames[i].image, stack.frames[i].valid);
       rf.pyramid = std::make_unique<FramePyramid>(target, f.valid, edge, sigma);
       frames.push_back(std::move(rf));

@@ -7,8 +7,8 @@
 // ghosts at once, by linear least squares against the frames for those outlines (fit/shade.h
 // ShadeEquations). With `refine`, the coefficients themselves are then refined against the
 // frames directly, in one Ceres problem whose parameter blocks are each ghost's coefficients and
-// whose residuals are the frames' pixels (a stride of frames, each at a level of its pyramid),
-// each frame's in units of its brightest model ghost's peak. It is off by default: it lowers the
+// whose residuals are the fitted frames' pixels (each frame less the pedestal found under the
+// ghosts, at a level of its pyramid), each frame's in units of its brightest model ghost's peak. It is off by default: it lowers the
 // model's PSNR (docs/fitting.md, limits). A ghost is kept over the frames where its shades draw
 // light above the noise, and dropped where they never do. The pedestal under the ghosts is
 // fitted last, to what the model's ghosts leave of every frame, and kept as polynomials too.
@@ -33,8 +33,7 @@ struct ModelFitOptions {
   bool reshade = true;                 // the shades' polynomials against the frames, for the outlines'
   ShadeOptions shade;                  // how (fit/shade.h)
   bool refine = false;                 // refine the coefficients against the frames (docs/fitting.md)
-  int refine_frame_stride = 3;         // the refinement uses every n-th frame of the capture (≥ 1)
-  int refine_pixels = 30000;           // each such frame at the first level within this many pixels
+  int refine_pixels = 30000;           // each fitted frame at the first level within this many pixels
   int refine_iterations = 10;          // Levenberg–Marquardt iterations of the refinement (≥ 1)
   CostOptions cost;                    // the refinement's cost (its shape prior is not used)
   double min_peak_sigma = 1;           // a ghost's range ends where its brightest value falls below
