@@ -8,10 +8,11 @@
 // ShadeEquations). With `refine`, the coefficients themselves are then refined against the
 // frames directly, in one Ceres problem whose parameter blocks are each ghost's coefficients and
 // whose residuals are the fitted frames' pixels (each frame less the pedestal found under the
-// ghosts, at a level of its pyramid), each frame's in units of its brightest model ghost's peak. It is off by default: it lowers the
-// model's PSNR (docs/fitting.md, limits). A ghost is kept over the frames where its shades draw
-// light above the noise, and dropped where they never do. The pedestal under the ghosts is
-// fitted last, to what the model's ghosts leave of every frame, and kept as polynomials too.
+// ghosts, at a level of its pyramid), each frame's in units of its brightest model ghost's peak.
+// It is off by default: it does not raise the model's PSNR (docs/fitting.md, limits). A ghost is
+// kept over the frames where its shades draw light above the noise, and dropped where they never
+// do. The pedestal under the ghosts is fitted last, to what the model's ghosts leave of every
+// frame, and kept as polynomials too.
 
 #include <string>
 #include <vector>
