@@ -107,12 +107,11 @@ SceneFits sceneFits(const NestedScene& scene, const FrameStack& stack, bool phan
 }
 
 model::FlareModel fitScene(const NestedScene& scene, const FrameStack& stack, bool phantom,
-                           const ModelFitOptions& options, const model::Pedestal& veil) {
+                           const ModelFitOptions& options) {
   Horizon horizon;
   horizon.y_px = 60.3;
   horizon.lights.resize(stack.frames.size());  // no light in these frames
-  SceneFits s = sceneFits(scene, stack, phantom);
-  for (auto& f : s.fits) f.pedestal = veil;
+  const SceneFits s = sceneFits(scene, stack, phantom);
   OpticalZero zero;
   zero.axis_x_px = 100;
   return fitModel(stack, horizon, LightPattern{}, s.candidates, s.fits, zero, options);
@@ -121,7 +120,7 @@ model::FlareModel fitScene(const NestedScene& scene, const FrameStack& stack, bo
 model::FlareModel fitScene(const NestedScene& scene, const FrameStack& stack, bool phantom) {
   ModelFitOptions options;
   options.pedestal = false;
-  return fitScene(scene, stack, phantom, options, {});
+  return fitScene(scene, stack, phantom, options);
 }
 
 TEST(ModelFit, DrawsNestedGhostsWhoseFramesTradedTheirShades) {
@@ -145,7 +144,7 @@ TEST(ModelFit, DrawsNestedGhostsWhoseFramesTradedTheirShades) {
 }
 
 // Refined against the frames, the model still draws them: the ghosts are refined against the
-// frames less the veil under them (the pedestal), which they do not draw.
+// frames less the veil under them (the pedestal the shades find), which they do not draw.
 TEST(ModelFit, RefinedGhostsDoNotDrawTheVeilUnderThem) {
   const NestedScene scene;
   FrameStack stack = scene.stack();
@@ -154,7 +153,7 @@ TEST(ModelFit, RefinedGhostsDoNotDrawTheVeilUnderThem) {
   for (auto& f : stack.frames) f.image += veil.image(scene.size);
   ModelFitOptions options;
   options.refine = true;
-  const model::FlareModel m = fitScene(scene, stack, false, options, veil);
+  const model::FlareModel m = fitScene(scene, stack, false, options);
   ASSERT_EQ(m.ghosts.size(), 2u);
   std::vector<double> ghosts, frames;
   for (double angle : scene.angles) {
