@@ -176,8 +176,8 @@ void registerFitEval(CLI::App& app) {
   cmd->add_option("CAPTURE", o->stack.inputs, "Capture folder, or EXR files / folders")->required();
   cmd->add_option("--frames", o->frames, "all (default) or odd (the frames --holdout odd left out)");
   cmd->add_option("--ceiling", o->ceiling,
-                  "The capture's model ceiling (flarekit fit-ceiling --json output): each frame's "
-                  "PSNR set against it");
+                  "The capture's model ceiling (flarekit fit-ceiling --json output; with --fit-above, "
+                  "the ceiling of the ghosts above that level): each frame's PSNR set against it");
   cmd->add_option("--plot", o->plot,
                   "PNG of PSNR and ghosts found over the angles (with the ceiling, when given)");
   cmd->add_flag("--json", o->json, "Print one JSON object");
@@ -211,12 +211,12 @@ void registerFitEval(CLI::App& app) {
         throw InputError(o->plot, "--plot writes a PNG: name it *.png");
       checkWritable(o->plot);  // before the evaluation, not after
     }
-    std::vector<fit::CeilingPoint> ceiling;
+    fit::CeilingCurve ceiling;
     if (!o->ceiling.empty()) {
       if (!stack.has_truth)
         throw InputError(o->ceiling,
                          "is a ceiling against ground truth, and the capture has none (truth/)");
-      ceiling = fit::parseCeilingPoints(loadJsonFile(o->ceiling).json(), stack.size, o->ceiling);
+      ceiling = fit::parseCeiling(loadJsonFile(o->ceiling).json(), stack.size, o->ceiling);
     }
     fit::EvaluationOptions options;
     options.odd_frames_only = o->frames == "odd";

@@ -284,8 +284,7 @@ std::string ModelCeiling::BriefReport() const {
   return s.str();
 }
 
-std::vector<CeilingPoint> parseCeilingPoints(const nlohmann::json& json, cv::Size image_size,
-                                             const std::string& source) {
+CeilingCurve parseCeiling(const nlohmann::json& json, cv::Size image_size, const std::string& source) {
   if (!json.is_object() || json.value("format", "") != kModelCeilingFormat)
     throw InputError(
         source, std::string("is not the output of flarekit fit-ceiling --json (no \"format\": \"") +
@@ -297,16 +296,34 @@ std::vector<CeilingPoint> parseCeilingPoints(const nlohmann::json& json, cv::Siz
                                    std::to_string(size.height) + " frames, the capture's are " +
                                    std::to_string(image_size.width) + "x" +
                                    std::to_string(image_size.height));
-    std::vector<CeilingPoint> points;
+    CeilingCurve curve;
+    // Files written before --fit-above existed are the model's ceiling.
+    curve.fit_above_sigma = json.value("fit_above_sigma", 0.0);
+    curve.quadratic_pedestal = json.value("pedestal", std::string("none")) == "quadratic";
     for (const auto& f : json.at("frames")) {
       // A frame whose ceiling PSNR is null (no flare region) has nothing to compare against.
       if (f.at("psnr_db").is_null()) continue;
-      points.push_back({f.at("angle_deg").get<double>(), f.at("psnr_db").get<double>()});
+      curve.points.push_back({f.at("angle_deg").get<double>(), f.at("psnr_db").get<double>()});
     }
-    return points;
+    return curve;
   } catch (const nlohmann::json::exception& e) {
     throw InputError(source, std::string("is not a complete fit-ceiling result: ") + e.what());
   }
+}
+
+std::string CeilingCurve::name() const {
+  if (!(fit_above_sigma > 0)) return "the model's ceiling (fit-ceiling)";
+  std::ostringstream s;
+  s << "the ceiling of the ghosts above " << fit_above_sigma << " σ (fit-ceiling --fit-above "
+    << fit_above_sigma << (quadratic_pedestal ? " --quadratic-pedestal)" : ")");
+  return s.str();
+}
+
+std::string CeilingCurve::label() const {
+  if (!(fit_above_sigma > 0)) return "the model's ceiling (fit-ceiling)";
+  std::ostringstream s;
+  s << "ceiling of the ghosts above " << fit_above_sigma << " sigma";
+  return s.str();
 }
 
 }  // namespace flarekit::fit

@@ -519,6 +519,7 @@ nlohmann::json Evaluation::toJson() const {
                   {"ceiling_psnr_db", number(f.ceiling_psnr_db)}});
   }
   j["frames"] = fs;
+  j["ceiling"] = ceiling.points.empty() ? nlohmann::json() : nlohmann::json(ceiling.name());
   j["ceiling_frames"] = ceiling_frames;
   j["median_ceiling_gap_db"] = number(median_ceiling_gap_db);
   nlohmann::json ghosts = nlohmann::json::array();
@@ -584,7 +585,7 @@ std::string Evaluation::BriefReport() const {
     s << (pieces.empty() ? "." : ").");
     s << " On the light's core or starburst: " << light_ghosts << ".";
   }
-  // Against the model's ceiling: the median loss, and the frames that lost most, up to three.
+  // Against the ceiling: the median loss, and the frames that lost most, up to three.
   if (ceiling_frames > 0) {
     std::vector<const FrameEvaluation*> lost;
     for (const auto& f : frames)
@@ -594,7 +595,7 @@ std::string Evaluation::BriefReport() const {
                        return a->ceiling_psnr_db - a->psnr_db > b->ceiling_psnr_db - b->psnr_db;
                      });
     if (lost.size() > 3) lost.resize(3);
-    s << " Against the model's ceiling (fit-ceiling) in " << ceiling_frames << " frame(s): median "
+    s << " Against " << ceiling.name() << " in " << ceiling_frames << " frame(s): median "
       << median_ceiling_gap_db << " dB below it; most at";
     for (size_t i = 0; i < lost.size(); ++i)
       s << (i == 0 ? " " : ", ") << lost[i]->angle_deg << "° (" << lost[i]->psnr_db << " against "
@@ -604,11 +605,12 @@ std::string Evaluation::BriefReport() const {
   return s.str();
 }
 
-void Evaluation::setCeiling(const std::vector<CeilingPoint>& ceiling) {
+void Evaluation::setCeiling(const CeilingCurve& curve) {
+  ceiling = curve;
   std::vector<double> gaps;
   for (auto& f : frames) {
     f.ceiling_psnr_db = kNaN;
-    for (const auto& c : ceiling)
+    for (const auto& c : ceiling.points)
       if (std::abs(c.angle_deg - f.angle_deg) <= kAngleToleranceDeg)
         f.ceiling_psnr_db = c.psnr_db;
     if (std::isfinite(f.ceiling_psnr_db) && std::isfinite(f.psnr_db))

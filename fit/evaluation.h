@@ -139,6 +139,21 @@ struct CeilingPoint {
   double psnr_db = 0;
 };
 
+// A ceiling read from `flarekit fit-ceiling --json`: its points, and which ceiling it is. With
+// every true ghost fitted it is the model's; with --fit-above N only the ghosts brighter than
+// N noise σ are, the rest drawn as a pedestal: what a fitter that finds those could reach.
+struct CeilingCurve {
+  std::vector<CeilingPoint> points;
+  double fit_above_sigma = 0;       // 0: every true ghost fitted
+  bool quadratic_pedestal = false;  // with fit_above_sigma: the pedestal a quadratic, else flat
+
+  // What it is, for reports: "the model's ceiling (fit-ceiling)", or e.g. "the ceiling of the
+  // ghosts above 10 σ (fit-ceiling --fit-above 10 --quadratic-pedestal)".
+  std::string name() const;
+  // The same in a few ASCII words, for a plot's legend: e.g. "ceiling of the ghosts above 10 sigma".
+  std::string label() const;
+};
+
 // One true ghost over the evaluated frames: in how many it was visible and found, and where and
 // how bright it was where it was missed (which ghosts a fit loses, at a glance; the per-frame
 // `missed` entries hold the details).
@@ -171,14 +186,16 @@ struct Evaluation {
   int true_ghosts_visible = 0, true_ghosts_found = 0, model_ghosts = 0, model_ghosts_matched = 0;
   int model_ghosts_pieces = 0;  // of the unmatched, pieces of a true ghost (FrameEvaluation::Unmatched)
   int light_ghosts = 0;         // of the unmatched, on the light's core or rays, over the frames
-  // Against the model's ceiling (setCeiling): the frames it was measured in, and the median of
-  // ceiling − PSNR over them (what the fitter falls short of the model's best by; NaN when none).
+  // Against a ceiling (setCeiling): the ceiling as given (no points: none), the frames it was
+  // measured in, and the median of ceiling − PSNR over them (what the fitter falls short of that
+  // best by; NaN when none).
+  CeilingCurve ceiling;
   int ceiling_frames = 0;
   double median_ceiling_gap_db = std::numeric_limits<double>::quiet_NaN();
 
   // Sets each frame's ceiling_psnr_db from the point at its angle (within kAngleToleranceDeg) and
   // the summary above; frames without one keep NaN.
-  void setCeiling(const std::vector<CeilingPoint>& ceiling);
+  void setCeiling(const CeilingCurve& curve);
 
   nlohmann::json toJson() const;
   std::string BriefReport() const;
@@ -292,11 +309,10 @@ struct ModelCeiling {
 // InputError when the stack has no ground truth.
 ModelCeiling measureModelCeiling(const FrameStack& stack, const CeilingOptions& options = {});
 
-// The frames' ceilings of ModelCeiling::toJson output (format kModelCeilingFormat) measured on a
-// capture of `image_size`; InputError naming `source` when `json` is not that.
+// The ceiling of ModelCeiling::toJson output (format kModelCeilingFormat) measured on a capture of
+// `image_size`; InputError naming `source` when `json` is not that.
 inline constexpr const char* kModelCeilingFormat = "flarekit-model-ceiling";
-std::vector<CeilingPoint> parseCeilingPoints(const nlohmann::json& json, cv::Size image_size,
-                                             const std::string& source);
+CeilingCurve parseCeiling(const nlohmann::json& json, cv::Size image_size, const std::string& source);
 
 // Median of the finite values (NaN when none).
 double medianOf(std::vector<double> values);

@@ -556,24 +556,39 @@ TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
     f.psnr_db = psnr;
     c.frames.push_back(f);
   }
-  ev.setCeiling(parseCeilingPoints(c.toJson(), kSize, "ceiling.json"));
+  ev.setCeiling(parseCeiling(c.toJson(), kSize, "ceiling.json"));
   EXPECT_DOUBLE_EQ(ev.frames[0].ceiling_psnr_db, 30);
   EXPECT_TRUE(std::isnan(ev.frames[1].ceiling_psnr_db));
   EXPECT_DOUBLE_EQ(ev.frames[2].ceiling_psnr_db, 36);
   EXPECT_EQ(ev.ceiling_frames, 2);
   EXPECT_DOUBLE_EQ(ev.median_ceiling_gap_db, 7.5);  // 10 dB and 5 dB below it
   const std::string brief = ev.BriefReport();
-  EXPECT_NE(brief.find("in 2 frame(s): median 7.5 dB below it; most at 0° (20 against 30 dB), 2° "
-                       "(31 against 36 dB)."),
+  EXPECT_NE(brief.find("Against the model's ceiling (fit-ceiling) in 2 frame(s): median 7.5 dB "
+                       "below it; most at 0° (20 against 30 dB), 2° (31 against 36 dB)."),
             std::string::npos)
       << brief;
-  const nlohmann::json j = ev.toJson();
+  nlohmann::json j = ev.toJson();
   EXPECT_EQ(j["median_ceiling_gap_db"].get<double>(), 7.5);
+  EXPECT_EQ(j["ceiling"].get<std::string>(), "the model's ceiling (fit-ceiling)");
   EXPECT_TRUE(j["frames"][1]["ceiling_psnr_db"].is_null());
+
+  // A ceiling of only the ghosts a fitter could find (--fit-above) is named as such: the gap to it
+  // is not the gap to the model's best.
+  c.fit_above_sigma = 10;
+  c.quadratic_pedestal = true;
+  ev.setCeiling(parseCeiling(c.toJson(), kSize, "ceiling.json"));
+  EXPECT_NE(ev.BriefReport().find("Against the ceiling of the ghosts above 10 σ (fit-ceiling "
+                                  "--fit-above 10 --quadratic-pedestal) in 2 frame(s)"),
+            std::string::npos)
+      << ev.BriefReport();
+  j = ev.toJson();
+  EXPECT_EQ(j["ceiling"].get<std::string>(),
+            "the ceiling of the ghosts above 10 σ (fit-ceiling --fit-above 10 --quadratic-pedestal)");
+  EXPECT_EQ(ev.ceiling.label(), "ceiling of the ghosts above 10 sigma");
 
   // A ceiling of another capture's size, and a file that is no ceiling: the file named, and why.
   try {
-    parseCeilingPoints(c.toJson(), {640, 427}, "ceiling.json");
+    parseCeiling(c.toJson(), {640, 427}, "ceiling.json");
     FAIL() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find(
@@ -582,7 +597,7 @@ TEST(ModelCeiling, EachFrameIsSetAgainstTheCeilingMeasuredAtItsAngle) {
         << e.what();
   }
   try {
-    parseCeilingPoints(ev.toJson(), kSize, "eval.json");
+    parseCeiling(ev.toJson(), kSize, "eval.json");
     FAIL() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("eval.json: is not the output of flarekit fit-ceiling"),

@@ -42,7 +42,7 @@ cv::Mat contactSheet(const cv::Mat& capture, const cv::Mat& fits_image, const cv
 
 // `flarekit fit-eval --plot FILE`: the evaluation over the capture's angles, 8-bit BGR. Above, each
 // frame's PSNR against the noise-free flare (against the capture without truth) and, where the
-// evaluation has one (Evaluation::setCeiling), the model's ceiling; below, per frame, the true
+// evaluation has one (Evaluation::setCeiling), the ceiling, named; below, per frame, the true
 // ghosts visible and found and, under the axis, the model ghosts matched to none (without truth:
 // the model ghosts).
 cv::Mat evaluationPlot(const Evaluation& evaluation);
