@@ -18,11 +18,14 @@
 #
 # --eval-only rates the fits already in DIR again (after a change to fit-eval) without fitting.
 # --holdout fits every other frame (fit --holdout odd) and rates the model on the frames it left
-# out (fit-eval --frames odd). --ceiling N rates each fit against the ceiling of the true ghosts above
-# N noise σ, the rest drawn as the model's quadratic pedestal (fit-ceiling --fit-above N
-# --quadratic-pedestal: what a fitter that found those ghosts could reach; 0: every ghost, the
-# model's ceiling), measured on every 5th frame and kept in DIR/ceilings. Captures are kept in DIR/captures/<lens>-640-s<seed>: simulating
-# one takes 3–20 min, a fit 0.5–10 min on 2 cores. Needs jq.
+# out (fit-eval --frames odd).
+# --ceiling N rates each fit against the ceiling of the true ghosts above N noise σ, the rest
+# drawn as the model's quadratic pedestal (fit-ceiling --fit-above N --quadratic-pedestal: what a
+# fitter that found those ghosts could reach; 0: every ghost, the model's ceiling), measured on
+# every 4th frame (the frames a fit fits, 0.8° apart; with --holdout every 5th, whose odd ones are
+# rated) and kept in DIR/ceilings.
+# Captures are kept in DIR/captures/<lens>-640-s<seed>: simulating one takes 3–20 min, a fit
+# 0.5–10 min on 2 cores. Needs jq.
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -82,12 +85,14 @@ for lens in $lenses; do
     fi
     ceiling_args=()
     if [[ -n $ceiling ]]; then
-      ceiling_file=$out/ceilings/$lens-640-s$seed-above$ceiling.json
+      every=4
+      ((holdout)) && every=5
+      ceiling_file=$out/ceilings/$lens-640-s$seed-above$ceiling-every$every.json
       if [[ ! -f $ceiling_file ]]; then
         mkdir -p "$out/ceilings"
         above=()
         [[ $ceiling != 0 ]] && above=(--fit-above "$ceiling" --quadratic-pedestal)
-        "$flarekit" -q fit-ceiling "$capture" --every 5 --json "${above[@]}" >"$ceiling_file.tmp"
+        "$flarekit" -q fit-ceiling "$capture" --every "$every" --json "${above[@]}" >"$ceiling_file.tmp"
         mv "$ceiling_file.tmp" "$ceiling_file"
       fi
       ceiling_args=(--ceiling "$ceiling_file")
