@@ -180,18 +180,20 @@ cv::Mat evaluationPlot(const Evaluation& ev) {
       ceilingMarker({top.px(f.angle_deg), top.py(f.ceiling_psnr_db)});
       has_ceiling = true;
     }
-  // The legend, on the panel's title line (inside the panel it would hide points), right-aligned.
+  // The legend, on the panel's title line (inside the panel it would hide points), moved left as
+  // far as the ceiling's label needs.
+  constexpr int kCeilingEntryPx = 142;  // the ceiling's entry, right of the frames' one
   const std::string ceiling_label = has_ceiling ? ev.ceiling.label() : "";
-  const int label_width =
-      ceiling_label.empty()
-          ? 0
-          : 142 + cv::getTextSize(ceiling_label, cv::FONT_HERSHEY_SIMPLEX, 0.45, 1, nullptr).width;
-  const cv::Point legend(top.area.x + top.area.width - std::max(400, label_width + 20), top.area.y - 10);
+  const int width =
+      has_ceiling
+          ? kCeilingEntryPx + cv::getTextSize(ceiling_label, cv::FONT_HERSHEY_SIMPLEX, 0.45, 1, nullptr).width
+          : 0;
+  const cv::Point legend(top.area.x + top.area.width - std::max(400, width + 20), top.area.y - 10);
   cv::line(image, legend, legend + cv::Point(24, 0), fit_colour, 2);
   cv::putText(image, "each frame", legend + cv::Point(30, 4), cv::FONT_HERSHEY_SIMPLEX, 0.45, ink,
               1, cv::LINE_AA);
   if (has_ceiling) {
-    const cv::Point c = legend + cv::Point(142, 0);
+    const cv::Point c = legend + cv::Point(kCeilingEntryPx, 0);
     ceilingMarker(c);
     cv::putText(image, ceiling_label, c + cv::Point(12, 4), cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1,
                 cv::LINE_AA);
